@@ -1,0 +1,5 @@
+import sys
+
+from bearcat.cli import main
+
+sys.exit(main())

@@ -1,0 +1,41 @@
+"""Parsers for the comma-separated values the commands take (``X,Y``, ``X,Y,R``).
+
+They raise ``argparse.ArgumentTypeError`` so argparse reports the culprit
+option with exit code 2, like any other bad argument.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+
+def numbers(text: str, counts: tuple[int, ...], what: str) -> tuple[float, ...]:
+    """Split ``text`` on commas into finite floats; the count must be one of ``counts``."""
+    parts = text.split(",")
+    if len(parts) not in counts:
+        expected = " or ".join(str(c) for c in counts)
+        raise argparse.ArgumentTypeError(f"{what} {text!r} needs {expected} comma-separated numbers")
+    try:
+        values = tuple(float(p) for p in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{what} {text!r} is not a list of numbers") from None
+    if not all(math.isfinite(v) for v in values):
+        raise argparse.ArgumentTypeError(f"{what} {text!r} has a value that is not a finite number")
+    return values
+
+
+def point(text: str) -> tuple[float, float]:
+    """``X,Y`` in map metres."""
+    return numbers(text, (2,), "point")  # type: ignore[return-value]
+
+
+def positive(text: str) -> float:
+    """A finite number above zero (speeds, radii, spacings)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value > 0):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number above zero")
+    return value

@@ -1,0 +1,1 @@
+"""Pure numerics: arrays in, result dataclasses out; no files, sockets or clocks."""
