@@ -10,6 +10,10 @@ import argparse
 import math
 
 
+class UsageError(Exception):
+    """Arguments that parse one by one but do not fit together; the message says how."""
+
+
 def numbers(text: str, counts: tuple[int, ...], what: str) -> tuple[float, ...]:
     """Split ``text`` on commas into finite floats; the count must be one of ``counts``."""
     parts = text.split(",")
@@ -38,4 +42,15 @@ def positive(text: str) -> float:
         raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
     if not (math.isfinite(value) and value > 0):
         raise argparse.ArgumentTypeError(f"{text!r} must be a finite number above zero")
+    return value
+
+
+def non_negative(text: str) -> float:
+    """A finite number at or above zero (radii that may vanish)."""
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a number") from None
+    if not (math.isfinite(value) and value >= 0):
+        raise argparse.ArgumentTypeError(f"{text!r} must be a finite number at or above zero")
     return value

@@ -12,12 +12,13 @@ import logging
 import sys
 
 from bearcat import __version__
+from bearcat.arguments import UsageError
 from bearcat.commands import maps as maps_command
 from bearcat.commands import solve as solve_command
 from maps.errors import MapError
 from solvers.errors import InputError
 
-USER_ERRORS = (MapError, InputError, FileNotFoundError, IsADirectoryError, PermissionError)
+USER_ERRORS = (UsageError, MapError, InputError, FileNotFoundError, IsADirectoryError, PermissionError)
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,0 +1,1 @@
+"""Guidance service, referee, UAV tasking and recorder."""

@@ -1,0 +1,1 @@
+"""The phone emulator and the walkers that carry it."""

@@ -1,0 +1,1 @@
+"""Network and sensor impairment models, named profiles and the bus shim that applies them."""
