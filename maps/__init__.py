@@ -1,0 +1,25 @@
+"""Maps: the playing area, obstacles, terrain zones and game regions, in local metres.
+
+Load one with ``load_map(name_or_path)``, lay it on a grid with
+``rasterize``. Files follow the schema in maps/SCHEMA.md.
+"""
+
+from maps.catalog import list_maps, load_map
+from maps.errors import MapError
+from maps.geojson import read_geojson, write_geojson
+from maps.model import ROLES, Map, Region, Zone
+from maps.raster import Raster, rasterize
+
+__all__ = [
+    "ROLES",
+    "Map",
+    "MapError",
+    "Raster",
+    "Region",
+    "Zone",
+    "list_maps",
+    "load_map",
+    "rasterize",
+    "read_geojson",
+    "write_geojson",
+]
