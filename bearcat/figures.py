@@ -39,14 +39,19 @@ def openloop_figure(
     S_k (its boundary, with level lines of phi_k inside), the stage's stretch of the
     path solid and the rest dotted, the defenders and the targets."""
     stages = solution.stages
-    fig, axes = plt.subplots(1, len(stages), figsize=(6.2 * len(stages), 6.4), squeeze=False)
+    fig, axes = plt.subplots(
+        1, len(stages), figsize=(6.2 * len(stages), 6.8), squeeze=False, layout="constrained"
+    )
     path = solution.path
     cuts = list(path.stage_starts) + [len(path.points) - 1] if path is not None else []
     for k, (ax, stage) in enumerate(zip(axes[0], stages)):
         draw_map(ax, game_map, labels=True)
         colour = STAGE_COLOURS[k % len(STAGE_COLOURS)]
         if stage.safe.any():
-            _contour(ax, raster, stage.safe.astype(float), levels=[0.5], colors=[colour], linewidths=1.8)
+            # Only where S_k meets free space: obstacles are outside S_k by
+            # construction, and outlining every building again says nothing.
+            inside = np.where(raster.free, stage.safe.astype(float), np.nan)
+            _contour(ax, raster, inside, levels=[0.5], colors=[colour], linewidths=1.8)
             finite = np.where(stage.safe, stage.phi, np.nan)
             levels = np.linspace(np.nanmin(finite), np.nanmax(finite), 12)[1:-1]
             if levels.size and levels[0] < levels[-1]:
@@ -65,5 +70,4 @@ def openloop_figure(
                      f"value {value}, S_{k + 1} area {entry['safe_area_m2']:.0f} m$^2$")
     verdict = "safe path found" if solution.reached else f"no safe path (stage {report['blocked_stage']})"
     fig.suptitle(f"open-loop reach-avoid on {game_map.name}: {verdict}")
-    fig.tight_layout()
     return fig
