@@ -84,3 +84,17 @@ def test_bad_input_is_one_sentence_naming_the_culprit_and_exit_code_2(words, cul
     assert "Traceback" not in run.stderr
     message = run.stderr.strip().splitlines()[-1]
     assert "error" in message and culprit in message
+
+
+def test_a_users_geojson_file_works_wherever_a_built_in_name_does(tmp_path):
+    from maps import write_geojson
+
+    field = tmp_path / "my-field.geojson"
+    write_geojson(load_map("field-50"), field)
+    by_name = bearcat("solve", "openloop", "--map", "field-50", "--attacker", "40,5", "--target", "home",
+                      "--defender", "5,20", "--capture-radius", "1", "--json", "-")
+    by_path = bearcat("solve", "openloop", "--map", str(field), "--attacker", "40,5", "--target", "home",
+                      "--defender", "5,20", "--capture-radius", "1", "--json", "-")
+    assert by_name.returncode == by_path.returncode == 0, by_path.stderr
+    value = [json.loads(run.stdout[run.stdout.index("{"):])["value_s"] for run in (by_name, by_path)]
+    assert value[0] is not None and value[0] == pytest.approx(value[1], abs=1e-3)
