@@ -1,0 +1,193 @@
+"""Time bearcat's HJI level-set solver against hj_reachability on the same
+problem, scheme, grid, CFL number, boundary rule and horizon.
+
+    python benchmarks/hji.py            # 45^4 over 6 time units, then ours to convergence and at 65^4
+    python benchmarks/hji.py --quick    # 21^4 over 2 time units, a few seconds per run
+
+Needs ``pip install jax hj-reachability`` (JAX on the CPU). Every solve runs in
+its own process so that its peak resident memory can be read from
+``getrusage``; both solvers are warmed up inside that process first (numba's
+cache load, JAX's compilation), so the seconds are solving only.
+
+The problem is the flag-return stage of 1 vs 1 capture-the-flag (thesis
+3.3.1) in an open square ``[-5, 5]^2`` per agent: the attacker (control, axes
+0-1) must reach the return strip ``x >= 4`` along one edge without coming
+within ``r_c = 0.5`` of the defender (disturbance, axes 2-3), who forfeits by
+entering the strip; both at speed 1. hj_reachability gets the same reach-avoid
+update (``max(min(J, l), -g)`` after every step), the same ghost extrapolation
+(``solvers.hji``: values rise beyond the attacker's edges and fall beyond the
+defender's), its own WENO5 + TVD-RK3 (``"very_high"``) or first-order upwind +
+Euler (``"low"``) and its default global Lax-Friedrichs dissipation, which for
+these dynamics equals ours.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+
+import numpy as np
+
+HJ_ACCURACY = {"first": "low", "weno5": "very_high"}
+CAPTURE_RADIUS = 0.5
+STRIP = 4.0
+
+
+def problem(n: int):
+    """Target ``l`` and avoid ``g`` on the ``n^4`` grid, float32."""
+    from solvers.grid import Grid
+
+    grid = Grid.spanning((-5.0,) * 4, (5.0,) * 4, (n,) * 4)
+    xa, ya, xd, yd = np.meshgrid(*grid.axes(), indexing="ij", sparse=True)
+    target = np.broadcast_to(np.minimum(STRIP - xa, STRIP - xd), grid.shape).astype(np.float32)
+    avoid = (np.hypot(xa - xd, ya - yd) - CAPTURE_RADIUS).astype(np.float32)
+    return grid, target, avoid
+
+
+def run_ours(n: int, scheme: str, horizon: float, tol: float) -> dict:
+    from solvers.hamiltonians import SimpleMotion
+    from solvers.hji import solve_reach_avoid
+
+    grid, target, avoid = problem(n)
+    game = SimpleMotion.pursuit(1.0, 1.0)
+    small, small_target, small_avoid = problem(9)
+    solve_reach_avoid(small, game, small_target, small_avoid, horizon=0.1, scheme=scheme)
+    start = time.perf_counter()
+    result = solve_reach_avoid(grid, game, target, avoid, horizon=horizon, scheme=scheme, tol=tol)
+    seconds = time.perf_counter() - start
+    return {
+        "seconds": seconds,
+        "steps": result.steps,
+        "time": result.time,
+        "converged_at": result.converged_at,
+        "set": result.reach_avoid_set,
+    }
+
+
+def _hj_edges(sign: float):
+    import jax.numpy as jnp
+
+    def pad(x, width):
+        ramp = jnp.arange(width, 0, -1)
+        left = x[0] + sign * jnp.abs(x[1] - x[0]) * ramp
+        right = x[-1] + sign * jnp.abs(x[-1] - x[-2]) * ramp[::-1]
+        return jnp.concatenate([left, x, right])
+
+    return pad
+
+
+def run_hj(n: int, scheme: str, horizon: float) -> dict:
+    import hj_reachability as hj
+    import jax.numpy as jnp
+
+    class Pursuit(hj.ControlAndDisturbanceAffineDynamics):
+        def __init__(self):
+            super().__init__(
+                "min", "max", hj.sets.Ball(jnp.zeros(2), 1.0), hj.sets.Ball(jnp.zeros(2), 1.0)
+            )
+
+        def open_loop_dynamics(self, state, time):
+            return jnp.zeros(4)
+
+        def control_jacobian(self, state, time):
+            return jnp.array([[1.0, 0.0], [0.0, 1.0], [0.0, 0.0], [0.0, 0.0]])
+
+        def disturbance_jacobian(self, state, time):
+            return jnp.array([[0.0, 0.0], [0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+
+    _, target, avoid = problem(n)
+    up, down = _hj_edges(1.0), _hj_edges(-1.0)
+    grid = hj.Grid.from_lattice_parameters_and_boundary_conditions(
+        hj.sets.Box(jnp.full(4, -5.0), jnp.full(4, 5.0)), (n,) * 4, boundary_conditions=(up, up, down, down)
+    )
+    l, g = jnp.asarray(target), jnp.asarray(avoid)
+    settings = hj.SolverSettings.with_accuracy(
+        HJ_ACCURACY[scheme], value_postprocessor=lambda t, v: jnp.maximum(jnp.minimum(v, l), -g)
+    )
+    initial = jnp.maximum(l, -g)
+    dynamics = Pursuit()
+    hj.solve(settings, dynamics, grid, jnp.array([0.0, -1e-3]), initial, progress_bar=False).block_until_ready()
+    start = time.perf_counter()
+    values = hj.solve(settings, dynamics, grid, jnp.array([0.0, -horizon]), initial, progress_bar=False)
+    final = np.asarray(values[-1].block_until_ready())
+    seconds = time.perf_counter() - start
+    dt = settings.CFL_number / (4 / float(grid.spacings[0]))
+    return {"seconds": seconds, "steps": int(np.ceil(horizon / dt - 1e-9)), "time": horizon,
+            "converged_at": None, "set": final <= 0}  # fmt: skip
+
+
+def child(args) -> None:
+    if args.solver == "ours":
+        out = run_ours(args.n, args.scheme, args.horizon, args.tol)
+    else:
+        out = run_hj(args.n, args.scheme, args.horizon)
+    np.save(args.mask, out.pop("set"))
+    out["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    print(json.dumps(out))
+
+
+def measure(solver: str, n: int, scheme: str, horizon: float, tol: float, mask: str) -> dict:
+    cmd = [sys.executable, __file__, "--child", solver, "--n", str(n), "--scheme", scheme,
+           "--horizon", str(horizon), "--tol", str(tol), "--mask", mask]  # fmt: skip
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")])))
+    done = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
+    if done.returncode != 0:
+        raise SystemExit(f"{solver} {scheme} n={n} failed:\n{done.stderr}")
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def row(label: str, n: int, r: dict, ratio: str = "", disagree: str = "") -> str:
+    ns = r["seconds"] / r["steps"] / n**4 * 1e9
+    conv = f"{r['converged_at']:.1f}" if r.get("converged_at") else "-"
+    return (f"{label:<24} {n:>3}^4 {r['time']:>6.1f} {conv:>6} {r['steps']:>5} {r['seconds']:>8.1f} {ns:>8.1f} "
+            f"{r['peak_mb']:>8.0f} {ratio:>7} {disagree:>9}")  # fmt: skip
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--quick", action="store_true", help="21^4 over 2 time units")
+    parser.add_argument("--child", choices=("ours", "hj"), dest="solver", help=argparse.SUPPRESS)
+    parser.add_argument("--n", type=int, default=45, help=argparse.SUPPRESS)
+    parser.add_argument("--scheme", default="weno5", help=argparse.SUPPRESS)
+    parser.add_argument("--horizon", type=float, default=6.0, help=argparse.SUPPRESS)
+    parser.add_argument("--tol", type=float, default=0.0, help=argparse.SUPPRESS)
+    parser.add_argument("--mask", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.solver:
+        child(args)
+        return
+
+    n, horizon = (21, 2.0) if args.quick else (45, 6.0)
+    print(f"flag-return set on [-5,5]^2 per agent, return strip x >= {STRIP}, r_c = {CAPTURE_RADIUS}, "
+          f"equal speeds, CFL 0.75, float32, {os.cpu_count()} cores")  # fmt: skip
+    print(f"{'solver':<24} {'grid':>5} {'horizon':>6} {'conv':>6} {'steps':>5} {'seconds':>8} "
+          f"{'ns/n/st':>8} {'peak MB':>8} {'speedup':>7} {'disagree':>9}")  # fmt: skip
+    with tempfile.TemporaryDirectory() as tmp:
+        for scheme in ("first", "weno5"):
+            ours_mask, hj_mask = os.path.join(tmp, "ours.npy"), os.path.join(tmp, "hj.npy")
+            ours = measure("ours", n, scheme, horizon, 0.0, ours_mask)
+            theirs = measure("hj", n, scheme, horizon, 0.0, hj_mask)
+            differ = float(np.mean(np.load(ours_mask) != np.load(hj_mask)))
+            print(row(f"hj_reachability {scheme}", n, theirs), flush=True)
+            print(row(f"bearcat {scheme}", n, ours, f"{theirs['seconds'] / ours['seconds']:.1f}x", f"{differ:.2e}"),
+                  flush=True)  # fmt: skip
+        for scheme in ("first", "weno5"):
+            conv = measure("ours", n, scheme, 30.0, 0.01, os.path.join(tmp, "conv.npy"))
+            print(row(f"bearcat {scheme}, to tol .01", n, conv), flush=True)
+        if not args.quick:
+            big = measure("ours", 65, "weno5", 1.0, 0.0, os.path.join(tmp, "big.npy"))
+            print(row("bearcat weno5 (memory)", 65, big), flush=True)
+    print("ns/n/st: nanoseconds per grid node per time step; disagree: fraction of nodes whose membership differs")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,326 @@
+"""Reach-avoid sets from the time-dependent Hamilton-Jacobi-Isaacs equation
+(thesis 3.2), on N-dimensional grids.
+
+The control wants to reach the target ``T = {l <= 0}`` within the horizon
+while never entering the avoid set ``K = {g <= 0}``, whatever the
+disturbance does. The value ``J`` is integrated backwards from the horizon:
+a backward-time step of ``dJ/dt = H(x, dJ/dx)`` followed by
+
+    J <- max(min(J, l), -g)
+
+after every full time step, from ``J = max(l, -g)``. This is the
+reach-avoid variational inequality of Fisac et al. (2015), the form
+helperOC's ``HJIPDE_solve`` applies with targets and obstacles: ``min`` with
+``l`` keeps every state that has reached the target (once in, the game is
+won), ``max`` with ``-g`` keeps every state in ``K`` lost, and the avoid set
+wins where the two overlap (capture inside the target still loses, as in
+thesis 3.3.1). Its zero sub-level set is the thesis's eq. 3.3, whose
+``min[0, H]`` instead freezes ``J`` wherever it would rise; this form lets
+the interior keep the game value ``min_t l(x(t))`` (subject to avoiding
+``K``), so gradients inside the set, and the strategies of eqs. 3.12-3.13
+drawn from them, stay meaningful. The reach-avoid set over the horizon is
+``{J <= 0}``.
+
+Numerics: WENO5 one-sided derivatives with third-order TVD Runge-Kutta
+(``scheme="weno5"``) or first-order upwind differences with forward Euler
+(``scheme="first"``), a Lax-Friedrichs numerical Hamiltonian (see
+``solvers.hamiltonians``), and a fixed step ``dt = cfl / max_x sum_k
+alpha_k(x) / dx_k``: the dissipation bounds depend on the state only, so the
+step is found once. The schemes are hj_reachability's
+``SolverSettings.with_accuracy("very_high")`` and ``("low")``.
+
+Grid edges are the edges of the state space, where nobody gains by leaving.
+Values beyond an edge are extrapolated linearly with the edge slope's
+magnitude (``hji_kernels._beyond``): rising beyond the edges of the axes the
+control moves along, so leaving never helps it reach the target, and, for
+simple motion, falling beyond the disturbance's axes, so leaving never helps
+it either; these are the rules of thesis 3.3.1 (an attacker that leaves the
+area loses, a defender that leaves forfeits) and, for general dynamics, the
+conservative side of the control's guarantee. The usual alternative,
+extrapolating away from zero, lets a player gain without bound by heading
+out of the grid, so values inside the sets drift for ever and a solve never
+converges. The edge rows are ordinary nodes of the area: a target touching
+the edge is a target up to its last row (the ``min`` with ``l`` holds it
+there) and is reached from the rows next to it. Leaving the area is a loss
+through the edge rule alone, so ``avoid`` need not (and must not, on rows
+that lie in the target) mark the edge rows.
+
+The solve stops early once ``|J(t) - J(t - check_every)|_inf < tol``
+(thesis 3.3.2); the result says whether and when. WENO5 settles into small
+oscillations near kinks of ``J``, around 1e-2 per half time unit on unit-size
+problems, so ``tol`` is in value units and should sit above that.
+"""
+
+from __future__ import annotations
+
+import math
+import numbers
+import os
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+from typing import Callable
+
+import numba
+import numpy as np
+
+from solvers import hji_kernels as kern
+from solvers.errors import InputError
+from solvers.grid import Grid
+from solvers.hamiltonians import lower
+
+__all__ = ["ReachAvoidResult", "SCHEMES", "required_bytes", "solve_reach_avoid"]
+
+
+@dataclass(frozen=True)
+class _Scheme:
+    order: int  # of the spatial derivatives
+    stages: int  # Runge-Kutta stages per step
+    buffers: int  # value-sized arrays the time stepping needs
+
+
+SCHEMES = {"weno5": _Scheme(5, 3, 3), "first": _Scheme(1, 1, 2)}
+
+# (a, b) of each stage out = a * u0 + b * (v + dt L(v)) (Shu & Osher 1988).
+_SHU_OSHER = {1: ((0.0, 1.0),), 3: ((0.0, 1.0), (0.75, 0.25), (1.0 / 3.0, 2.0 / 3.0))}
+
+# Both schemes are stable up to cfl = 1 (the Euler step is then monotone);
+# 0.75 is hj_reachability's default for every accuracy.
+DEFAULT_CFL = 0.75
+
+
+@dataclass(frozen=True)
+class ReachAvoidResult:
+    """``value`` is ``J`` at the end of the backward integration, after
+    ``time`` units (the horizon, or less if it converged) and ``steps`` time
+    steps. ``converged_at`` is the time at which a whole ``check_every``
+    window changed ``J`` by less than ``tol``, or None.
+
+    With ``record_tstar``, ``tstar`` holds per node the backward time at which
+    the node entered the set (linearly interpolated within the step; 0 inside
+    the initial set, inf if never) and ``tstar_gradient`` (shape
+    ``grid.shape + (ndim,)``) the central gradient of ``J`` at that moment,
+    from which eqs. 3.12-3.13 give the controls where the interior value is
+    unreliable (end of thesis 3.4)."""
+
+    value: np.ndarray
+    converged: bool
+    converged_at: float | None
+    time: float
+    steps: int
+    tstar: np.ndarray | None = None
+    tstar_gradient: np.ndarray | None = None
+
+    @property
+    def reach_avoid_set(self) -> np.ndarray:
+        return self.value <= 0
+
+
+def required_bytes(
+    grid: Grid, *, scheme: str = "weno5", dtype=np.float32, has_avoid: bool = True, record_tstar: bool = False
+) -> int:
+    """Bytes of the arrays a solve allocates: the time-stepping buffers, the
+    convergence snapshot and its copies of ``target`` and ``avoid`` (all
+    padded with three ghost nodes each side of the last two axes), and the
+    optional T* record. The result replaces the buffers at the end."""
+    na, nb = grid.shape[-2:]
+    padded = grid.size // (na * nb) * (na + 6) * (nb + 6)
+    n_padded = _scheme(scheme).buffers + 2 + int(has_avoid)
+    n_plain = (1 + grid.ndim) if record_tstar else 0
+    return (n_padded * padded + n_plain * grid.size) * np.dtype(dtype).itemsize
+
+
+def available_bytes() -> int:
+    """Physical memory not in use now."""
+    return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+
+
+def solve_reach_avoid(
+    grid: Grid,
+    hamiltonian,
+    target,
+    avoid=None,
+    *,
+    horizon: float,
+    scheme: str = "weno5",
+    cfl: float = DEFAULT_CFL,
+    dtype=np.float32,
+    tol: float = 1e-2,
+    check_every: float = 0.5,
+    record_tstar: bool = False,
+    progress: Callable[[float, float], None] | None = None,
+    memory_limit: int | None = None,
+) -> ReachAvoidResult:
+    """The reach-avoid set of ``target`` (``l``, <= 0 inside) avoiding
+    ``avoid`` (``g``, <= 0 inside; None for none) within ``horizon``.
+
+    ``hamiltonian`` is a ``solvers.hamiltonians.SimpleMotion`` or
+    ``ControlAffine``. Time and values are in the units of the dynamics and of
+    ``l`` and ``g``: ``tol`` is a value change over ``check_every`` time units
+    (0 integrates to the horizon). ``progress(t, change)`` is called after
+    every check with the time reached and the last window's change.
+    ``memory_limit`` (bytes) defaults to the free physical memory; a grid
+    whose arrays would not fit (``required_bytes``) is refused before
+    anything is allocated. Grids need at least two dimensions."""
+    if not isinstance(grid, Grid):
+        raise InputError(f"grid must be a solvers.grid.Grid, got {type(grid).__name__}")
+    sch = _scheme(scheme)
+    dtype = np.dtype(dtype)
+    if dtype not in (np.float32, np.float64):
+        raise InputError(f"dtype must be float32 or float64, got {dtype}")
+    _check_positive("horizon", horizon)
+    _check_positive("check_every", check_every)
+    if not (math.isfinite(cfl) and 0 < cfl <= 1):
+        raise InputError(f"cfl must be in (0, 1], got {cfl}")
+    if not (math.isfinite(tol) and tol >= 0):
+        raise InputError(f"tol must be finite and >= 0, got {tol}")
+    if grid.ndim < 2:
+        raise InputError(f"the grid must have at least 2 dimensions, got {grid.ndim}")
+    target = _grid_array("target", target, grid)
+    avoid = None if avoid is None else _grid_array("avoid", avoid, grid)
+    limit = available_bytes() if memory_limit is None else int(memory_limit)
+    need = required_bytes(grid, scheme=scheme, dtype=dtype, has_avoid=avoid is not None, record_tstar=record_tstar)
+    if need > limit:
+        dims = "x".join(str(n) for n in grid.shape)
+        raise InputError(
+            f"grid {dims} ({grid.size:,} nodes) needs about {need / 1e9:.2f} GB for the {scheme} solve "
+            f"in {dtype.name} but only {limit / 1e9:.2f} GB of memory is available"
+        )
+    _check_finite("target", target)
+    if avoid is not None:
+        _check_finite("avoid", avoid)
+
+    ham = lower(hamiltonian, grid, dtype)
+    dt_max = cfl / ham.rate if ham.rate > 0 else check_every
+
+    target = _padded(target, grid, dtype)
+    avoid = None if avoid is None else _padded(avoid, grid, dtype)
+    if avoid is None:
+        u = target.copy()
+    else:
+        u = np.negative(avoid)
+        np.maximum(u, target, out=u)
+    kern.fill_ghosts(u, np.asarray(grid.shape, np.int64), ham.edge_sign)
+    # Copies rather than empty arrays, so no buffer ever holds uninitialised
+    # values that the convergence check would read.
+    buffers = [u] + [u.copy() for _ in range(sch.buffers - 1)]
+    snapshot = u.copy()
+    del u
+    tstar = np.full(grid.size, np.inf, dtype) if record_tstar else np.zeros(0, dtype)
+    tgrad = np.zeros(grid.size * grid.ndim, dtype) if record_tstar else np.zeros(0, dtype)
+    stepper = _Stepper(grid, sch, dtype, target, avoid, ham.args, record_tstar, tstar, tgrad)
+
+    t, steps, converged_at = 0.0, 0, None
+    with ThreadPoolExecutor(max_workers=len(stepper.ranges)) as pool:
+        while t < horizon and converged_at is None:
+            window = min(check_every, horizon - t)
+            n_steps = max(1, math.ceil(window / dt_max - 1e-9))
+            dt = window / n_steps
+            np.copyto(snapshot, buffers[0])
+            for k in range(n_steps):
+                stepper.step(pool, buffers, dt, t + k * dt)
+            steps += n_steps
+            t += window
+            change = float(kern.max_abs_difference(buffers[0], snapshot))
+            if progress is not None:
+                progress(t, change)
+            if window >= check_every and change < tol:
+                converged_at = t
+
+    value = buffers[0]
+    del buffers, snapshot, target, avoid, stepper
+    return ReachAvoidResult(
+        value=_unpadded(value, grid),
+        converged=converged_at is not None,
+        converged_at=converged_at,
+        time=t,
+        steps=steps,
+        tstar=tstar.reshape(grid.shape) if record_tstar else None,
+        tstar_gradient=tgrad.reshape(grid.shape + (grid.ndim,)) if record_tstar else None,
+    )
+
+
+class _Stepper:
+    """Runs the stage kernel over the planes of the grid, split between
+    threads in contiguous ranges."""
+
+    def __init__(self, grid, sch, dtype, target, avoid, ham_args, record, tstar, tgrad):
+        self.stages = sch.stages
+        self.dtype = dtype
+        self.record = record
+        self.fixed = (
+            target,
+            avoid if avoid is not None else target,
+            avoid is not None,
+            np.asarray(grid.shape, np.int64),
+            np.asarray([1.0 / h for h in grid.spacing], dtype),
+            sch.order,
+            kern.constants(dtype),
+            *ham_args,
+        )
+        self.tstar, self.tgrad = tstar, tgrad
+        planes = grid.size // (grid.shape[-1] * grid.shape[-2])
+        n = max(1, min(planes, numba.get_num_threads()))
+        self.ranges = [(i * planes // n, (i + 1) * planes // n) for i in range(n)]
+
+    def step(self, pool, buffers, dt: float, t: float) -> None:
+        """One time step from time ``t``; the new value ends up in ``buffers[0]``."""
+        u = buffers[0]
+        sources = buffers[: self.stages]
+        outs = (buffers[1:] + buffers[1:2])[: self.stages]
+        cast = self.dtype.type
+        for i, ((a, b), v, out) in enumerate(zip(_SHU_OSHER[self.stages], sources, outs)):
+            final = i == self.stages - 1
+            args = (v, u, out, cast(a), cast(b), cast(dt), final, *self.fixed,
+                    self.record and final, t, self.tstar, self.tgrad)  # fmt: skip
+            if len(self.ranges) == 1:
+                kern.stage(*self.ranges[0], *args)
+            else:
+                for f in [pool.submit(kern.stage, *r, *args) for r in self.ranges]:
+                    f.result()
+        buffers[0], buffers[1] = buffers[1], buffers[0]
+
+
+def _scheme(name: str) -> _Scheme:
+    try:
+        return SCHEMES[name]
+    except (KeyError, TypeError):
+        raise InputError(f"scheme must be one of {sorted(SCHEMES)}, got {name!r}") from None
+
+
+def _check_positive(name: str, value) -> None:
+    if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
+        raise InputError(f"{name} must be a positive number, got {value!r}")
+
+
+def _grid_array(name: str, a, grid: Grid) -> np.ndarray:
+    a = np.asarray(a)
+    if a.shape != grid.shape:
+        raise InputError(f"{name} has shape {a.shape} but the grid has shape {grid.shape}")
+    if not np.issubdtype(a.dtype, np.floating) and not np.issubdtype(a.dtype, np.integer):
+        raise InputError(f"{name} must hold numbers, got dtype {a.dtype}")
+    return a
+
+
+def _check_finite(name: str, a: np.ndarray) -> None:
+    bad = ~np.isfinite(a)
+    if bad.any():
+        first = tuple(int(i) for i in np.argwhere(bad)[0])
+        what = "NaN" if np.isnan(a[first]) else "infinite"
+        raise InputError(f"{name} has {int(bad.sum())} non-finite values, the first {what} at node {first}")
+
+
+def _padded_view(flat: np.ndarray, grid: Grid) -> np.ndarray:
+    """The grid nodes of a padded flat array, as an N-D view."""
+    na, nb = grid.shape[-2:]
+    return flat.reshape(grid.shape[:-2] + (na + 6, nb + 6))[..., 3:-3, 3:-3]
+
+
+def _padded(a: np.ndarray, grid: Grid, dtype) -> np.ndarray:
+    na, nb = grid.shape[-2:]
+    flat = np.zeros(grid.size // (na * nb) * (na + 6) * (nb + 6), dtype)
+    _padded_view(flat, grid)[...] = a
+    return flat
+
+
+def _unpadded(flat: np.ndarray, grid: Grid) -> np.ndarray:
+    return np.ascontiguousarray(_padded_view(flat, grid))

@@ -1,0 +1,433 @@
+"""Compiled kernels of the level-set solver in ``solvers.hji``.
+
+Every function the stage kernel calls lives in this one module because numba
+invalidates an on-disk cache entry only when the file holding the cached
+function changes: a derivative scheme kept in another file could change
+without the cached stage kernel noticing.
+
+Value-sized arrays are stored padded: three ghost nodes on each side of the
+last two axes, so that a plane (all nodes sharing the indices of the outer
+axes) is one contiguous block of ``(na + 6) * (nb + 6)`` values whose
+neighbours along either plane axis are fixed offsets away. For each plane
+the kernel builds one-sided derivatives along every axis, the numerical
+Hamiltonian and the Runge-Kutta combination in a few straight loops over the
+plane's rows taken as one run (ghost columns included and overwritten
+afterwards), so the loops are long and vectorise, and only plane-sized
+scratch exists besides the value buffers. Neighbour planes along the outer
+axes are read in place; only planes beyond the grid edge are made up.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numba import njit, types
+
+# No nnan/ninf: infinities are meaningful (T* of nodes never reached).
+_FASTMATH = {"nsz", "arcp", "contract", "afn", "reassoc"}
+
+WENO_EPS = 1e-6  # the smoothness-indicator offset of hj_reachability and ToolboxLS
+
+SIMPLE_MOTION = 0
+CONTROL_AFFINE = 1
+
+NO_INPUT = 0
+BOX = 1
+BALL = 2
+
+DYNAMICS_SIGNATURE = types.void(
+    types.float64[::1], types.float64[::1], types.float64[:, ::1], types.float64[:, ::1]
+)
+
+
+@njit(DYNAMICS_SIGNATURE, cache=True)
+def no_dynamics(x, f0, G, K):
+    """Fills the dynamics slot of the kernels under simple motion; never called."""
+
+
+def constants(dtype) -> np.ndarray:
+    """The numbers the kernels use, in the value dtype: a float literal in
+    the loops would turn float32 arithmetic into float64 and halve the
+    vector width."""
+    return np.array(
+        [13 / 12, 1 / 4, 2, 3, 4, WENO_EPS, 0.1, 0.6, 0.3, 1 / 3, 1 / 6, 7 / 6, 11 / 6, 5 / 6, 0.5], dtype=dtype
+    )
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _weno5(d0, d1, d2, d3, d4, c):
+    """Jiang-Peng WENO5 derivative from five consecutive divided differences,
+    upwind end first (Osher & Fedkiw, eqs. 3.28-3.39); ``c`` is ``constants``."""
+    c1312, c14, two, three, four, eps, w1, w2, w3, third, sixth, c76, c116, c56 = c
+    t, r = d0 - two * d1 + d2, d0 - four * d1 + three * d2
+    s1 = c1312 * t * t + c14 * r * r + eps
+    t, r = d1 - two * d2 + d3, d1 - d3
+    s2 = c1312 * t * t + c14 * r * r + eps
+    t, r = d2 - two * d3 + d4, three * d2 - four * d3 + d4
+    s3 = c1312 * t * t + c14 * r * r + eps
+    a1 = w1 / (s1 * s1)
+    a2 = w2 / (s2 * s2)
+    a3 = w3 / (s3 * s3)
+    p1 = d0 * third - c76 * d1 + c116 * d2
+    p2 = c56 * d2 - d1 * sixth + d3 * third
+    p3 = d2 * third + c56 * d3 - d4 * sixth
+    return (a1 * p1 + a2 * p2 + a3 * p3) / (a1 + a2 + a3)
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx, order, k, left, right):
+    """Left and right derivatives along one axis for a whole run; ``r3`` is
+    the run itself and ``r0``..``r6`` its neighbours at offsets -3..3 along
+    the axis (first order reads only ``r2``..``r4``)."""
+    n = left.shape[0]
+    if order == 1:
+        for j in range(n):
+            left[j] = (r3[j] - r2[j]) * inv_dx
+            right[j] = (r4[j] - r3[j]) * inv_dx
+        return
+    c = (k[0], k[1], k[2], k[3], k[4], k[5], k[6], k[7], k[8], k[9], k[10], k[11], k[12], k[13])
+    for j in range(n):
+        d0 = (r1[j] - r0[j]) * inv_dx
+        d1 = (r2[j] - r1[j]) * inv_dx
+        d2 = (r3[j] - r2[j]) * inv_dx
+        d3 = (r4[j] - r3[j]) * inv_dx
+        d4 = (r5[j] - r4[j]) * inv_dx
+        d5 = (r6[j] - r5[j]) * inv_dx
+        left[j] = _weno5(d0, d1, d2, d3, d4, c)
+        right[j] = _weno5(d5, d4, d3, d2, d1, c)
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _beyond(edge, inner, distance, sign):
+    """The value ``distance`` nodes beyond a grid edge: the edge value moved
+    by the edge slope's magnitude, upwards (``sign`` +1) or downwards (-1),
+    so that whoever the ``sign`` works against never gains by leaving the
+    grid (see ``solvers.hji``)."""
+    return edge + sign * abs(edge - inner) * distance
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _ghost(edge, inner, distance, sign, out):
+    for j in range(out.shape[0]):
+        out[j] = _beyond(edge[j], inner[j], distance, sign)
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _neighbour(v, base, n, i, o, size, stride, w, sign, scratch):
+    """The plane ``o`` nodes away along an outer axis from the plane at
+    ``base`` (``n`` values), whose index along that axis is ``i`` of
+    ``size``; beyond the edge it is made up in ``scratch``. Offsets beyond
+    the stencil half-width ``w`` are unused and give the plane itself."""
+    if o > w or o < -w:
+        o = 0
+    j = i + o
+    if j < 0:
+        e = base - i * stride
+        _ghost(v[e : e + n], v[e + stride : e + stride + n], -j, sign, scratch)
+        return scratch
+    if j >= size:
+        e = base + (size - 1 - i) * stride
+        _ghost(v[e : e + n], v[e - stride : e - stride + n], j - size + 1, sign, scratch)
+        return scratch
+    return v[base + o * stride : base + o * stride + n]
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _input_extremum(c, kind, a, b, sense):
+    """``sense * max over the input set of sense * c.w``: the control's
+    minimum (sense -1) or the disturbance's maximum (sense +1) of ``c . w``
+    over a box ``[a, b]`` or a ball of centre ``a`` and radius ``b[0]``."""
+    if kind == BOX:
+        s = 0.0
+        for i in range(c.shape[0]):
+            s += max(sense * c[i] * a[i], sense * c[i] * b[i])
+        return sense * s
+    if kind == BALL:
+        s = 0.0
+        norm = 0.0
+        for i in range(c.shape[0]):
+            s += c[i] * a[i]
+            norm += c[i] * c[i]
+        return s + sense * b[0] * np.sqrt(norm)
+    return 0.0
+
+
+@njit(cache=True)
+def _input_bounds(kind, a, b, out):
+    """Largest magnitude of each input component over its set."""
+    for i in range(out.shape[0]):
+        if kind == BOX:
+            out[i] = max(abs(a[i]), abs(b[i]))
+        else:
+            out[i] = abs(a[i]) + b[0]
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _dissipation_coefficient(k, f0, G, K, umax, dmax):
+    """A bound on ``|dH/dp_k|`` over all gradients (ToolboxLS eq. 25), as
+    hj_reachability's Lax-Friedrichs schemes use for affine dynamics."""
+    alpha = abs(f0[k])
+    for i in range(umax.shape[0]):
+        alpha += abs(G[k, i]) * umax[i]
+    for i in range(dmax.shape[0]):
+        alpha += abs(K[k, i]) * dmax[i]
+    return alpha
+
+
+@njit(cache=True)
+def _plane_index(p, shape, idx):
+    """Grid indices of plane ``p`` along the outer axes."""
+    for k in range(shape.shape[0] - 3, -1, -1):
+        idx[k] = p % shape[k]
+        p //= shape[k]
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _fill_ghosts(arr, start, na, nb, sign_a, sign_b):
+    """Ghost columns of every row, then ghost rows, of the padded plane
+    beginning at ``start``; ``sign_a`` and ``sign_b`` are the edge signs of
+    the plane's two axes."""
+    W = nb + 6
+    for i in range(na):
+        r = start + (3 + i) * W + 3
+        for m in range(1, 4):
+            arr[r - m] = _beyond(arr[r], arr[r + 1], m, sign_b)
+            arr[r + nb - 1 + m] = _beyond(arr[r + nb - 1], arr[r + nb - 2], m, sign_b)
+    first = start + 3 * W
+    last = start + (2 + na) * W
+    for m in range(1, 4):
+        _ghost(arr[first : first + W], arr[first + W : first + 2 * W], m, sign_a,
+               arr[first - m * W : first - (m - 1) * W])  # fmt: skip
+        _ghost(arr[last : last + W], arr[last - W : last], m, sign_a, arr[last + m * W : last + (m + 1) * W])
+
+
+@njit(cache=True)
+def fill_ghosts(arr, shape, edge_sign):
+    """Ghost nodes of every plane of a padded array."""
+    na, nb = shape[-2], shape[-1]
+    plane = (na + 6) * (nb + 6)
+    for p in range(arr.shape[0] // plane):
+        _fill_ghosts(arr, p * plane, na, nb, edge_sign[-2], edge_sign[-1])
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _affine_plane(idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
+                  x, f0, G, K, p, cu, cd, umax, dmax, dv):  # fmt: skip
+    """Lax-Friedrichs Hamiltonian of control-affine dynamics over a plane."""
+    ndim = lo.shape[0]
+    ka, kb = ndim - 2, ndim - 1
+    W = nb + 6
+    for k in range(ka):
+        x[k] = lo[k] + idx[k] * dx[k]
+    for i in range(na):
+        x[ka] = lo[ka] + i * dx[ka]
+        for jj in range(nb):
+            j = i * W + 3 + jj
+            x[kb] = lo[kb] + jj * dx[kb]
+            dyn(x, f0, G, K)
+            h = 0.0
+            diss = 0.0
+            for k in range(ndim):
+                p[k] = 0.5 * (pl[k, j] + pr[k, j])
+                h += p[k] * f0[k]
+                diss += _dissipation_coefficient(k, f0, G, K, umax, dmax) * (pr[k, j] - pl[k, j])
+            for i_u in range(cu.shape[0]):
+                s = 0.0
+                for k in range(ndim):
+                    s += G[k, i_u] * p[k]
+                cu[i_u] = s
+            for i_d in range(cd.shape[0]):
+                s = 0.0
+                for k in range(ndim):
+                    s += K[k, i_d] * p[k]
+                cd[i_d] = s
+            h += _input_extremum(cu, u_kind, u_a, u_b, -1.0) + _input_extremum(cd, d_kind, d_a, d_b, 1.0)
+            dv[j] = h + 0.5 * diss
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _simple_motion_plane(idx, na, nb, pl, pr, half, axis_player, player_sign, speed, speed_offset, speed_stride,
+                         spd, norm, dv):  # fmt: skip
+    """Lax-Friedrichs Hamiltonian ``sum_q sign_q v_q |p_q|`` over a plane,
+    with each axis's dissipation coefficient the local speed of its player."""
+    ndim = axis_player.shape[0]
+    ka, kb = ndim - 2, ndim - 1
+    W = nb + 6
+    n = dv.shape[0]
+    for q in range(player_sign.shape[0]):
+        base = speed_offset[q]
+        for k in range(ka):
+            base += idx[k] * speed_stride[q, k]
+        sa, sb = speed_stride[q, ka], speed_stride[q, kb]
+        for i in range(na):
+            row = spd[q, i * W + 3 : i * W + 3 + nb]
+            for jj in range(nb):
+                row[jj] = speed[base + i * sa + jj * sb]
+        for j in range(n):
+            norm[q, j] = 0
+    for j in range(n):
+        dv[j] = 0
+    for k in range(ndim):
+        q = axis_player[k]
+        if q < 0:
+            continue
+        for j in range(n):
+            c = half * (pl[k, j] + pr[k, j])
+            norm[q, j] += c * c
+            dv[j] += half * spd[q, j] * (pr[k, j] - pl[k, j])
+    for q in range(player_sign.shape[0]):
+        s = player_sign[q]
+        for j in range(n):
+            dv[j] += s * spd[q, j] * np.sqrt(norm[q, j])
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _stencil(v, base, n, k, idx, shape, w, sign, ghosts):
+    """The seven runs at offsets -3..3 along axis ``k`` around the run of
+    plane rows at ``base``: in place along the plane axes (ghosts are
+    stored), in place or made up in ``ghosts`` along the outer axes."""
+    ndim = shape.shape[0]
+    na, nb = shape[ndim - 2], shape[ndim - 1]
+    if k >= ndim - 2:
+        st = nb + 6 if k == ndim - 2 else 1
+        return (
+            v[base - 3 * st : base - 3 * st + n], v[base - 2 * st : base - 2 * st + n],
+            v[base - st : base - st + n], v[base : base + n], v[base + st : base + st + n],
+            v[base + 2 * st : base + 2 * st + n], v[base + 3 * st : base + 3 * st + n],
+        )  # fmt: skip
+    st = (na + 6) * (nb + 6)
+    for j in range(k + 1, ndim - 2):
+        st *= shape[j]
+    i, size = idx[k], shape[k]
+    return (
+        _neighbour(v, base, n, i, -3, size, st, w, sign, ghosts[0]),
+        _neighbour(v, base, n, i, -2, size, st, w, sign, ghosts[1]),
+        _neighbour(v, base, n, i, -1, size, st, w, sign, ghosts[2]),
+        v[base : base + n],
+        _neighbour(v, base, n, i, 1, size, st, w, sign, ghosts[4]),
+        _neighbour(v, base, n, i, 2, size, st, w, sign, ghosts[5]),
+        _neighbour(v, base, n, i, 3, size, st, w, sign, ghosts[6]),
+    )
+
+
+@njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
+def stage(
+    first, stop, v, u0, out, a, b, dt, final, target, avoid, has_avoid, shape, inv_dx, order, consts,
+    edge_sign, kind, axis_player, player_sign, speed, speed_offset, speed_stride,
+    lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
+    record, t_old, tstar, tgrad,
+):  # fmt: skip
+    """One Runge-Kutta stage in Shu-Osher form on planes ``first`` to
+    ``stop - 1`` of padded arrays: ``out = a u0 + b (v + dt L(v))`` with
+    ``L`` the Lax-Friedrichs numerical Hamiltonian of backward time, ghosts
+    of ``out`` refreshed. The last stage of a step (``final``) also applies
+    the reach-avoid clamp ``max(min(out, target), -avoid)`` and, if
+    ``record``, stamps T* and the gradient (unpadded arrays) on nodes
+    entering the set. It releases the GIL so that threads can share the
+    planes: numba's own parallel loops would double the cold compile time."""
+    ndim = shape.shape[0]
+    na, nb = shape[ndim - 2], shape[ndim - 1]
+    W = nb + 6
+    n = na * W  # the run of real rows, ghost columns included
+    w = 1 if order == 1 else 3
+    m, q, nplayers = u_a.shape[0], d_a.shape[0], player_sign.shape[0]
+    idx = np.zeros(ndim, np.int64)
+    ghosts = np.empty((7, n), v.dtype)
+    pl = np.empty((ndim, n), v.dtype)
+    pr = np.empty((ndim, n), v.dtype)
+    dv = np.empty(n, v.dtype)
+    spd = np.zeros((nplayers, n), v.dtype)
+    norm = np.empty((nplayers, n), v.dtype)
+    x, f0, p = np.empty(ndim), np.empty(ndim), np.empty(ndim)
+    G, K = np.empty((ndim, m)), np.empty((ndim, q))
+    cu, cd, umax, dmax = np.empty(m), np.empty(q), np.empty(m), np.empty(q)
+    _input_bounds(u_kind, u_a, u_b, umax)
+    _input_bounds(d_kind, d_a, d_b, dmax)
+    for pi in range(first, stop):
+        start = pi * (na + 6) * W
+        base = start + 3 * W
+        _plane_index(pi, shape, idx)
+        for k in range(ndim):
+            r0, r1, r2, r3, r4, r5, r6 = _stencil(v, base, n, k, idx, shape, w, edge_sign[k], ghosts)
+            _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx[k], order, consts, pl[k], pr[k])
+        if kind == SIMPLE_MOTION:
+            _simple_motion_plane(idx, na, nb, pl, pr, consts[14], axis_player, player_sign, speed,
+                                 speed_offset, speed_stride, spd, norm, dv)  # fmt: skip
+        else:
+            _affine_plane(idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
+                          x, f0, G, K, p, cu, cd, umax, dmax, dv)  # fmt: skip
+        centre = v[base : base + n]
+        o_run = out[base : base + n]
+        u_run = u0[base : base + n]
+        for j in range(n):
+            o_run[j] = a * u_run[j] + b * (centre[j] + dt * dv[j])
+        if final:
+            t_run = target[base : base + n]
+            for j in range(n):
+                o_run[j] = min(o_run[j], t_run[j])
+            if has_avoid:
+                g_run = avoid[base : base + n]
+                for j in range(n):
+                    o_run[j] = max(o_run[j], -g_run[j])
+            if record:
+                _record(o_run, u_run, pl, pr, na, nb, pi * na * nb, t_old, dt, tstar, tgrad)
+        _fill_ghosts(out, start, na, nb, edge_sign[ndim - 2], edge_sign[ndim - 1])
+
+
+@njit(cache=True)
+def _record(o_run, u_run, pl, pr, na, nb, offset, t_old, dt, tstar, tgrad):
+    """T* and the central gradient of the nodes of one plane that entered
+    the set during this step; the entry time is interpolated linearly."""
+    ndim = pl.shape[0]
+    W = nb + 6
+    for i in range(na):
+        for jj in range(nb):
+            j = i * W + 3 + jj
+            node = offset + i * nb + jj
+            after = o_run[j]
+            if after <= 0 and tstar[node] == np.inf:
+                before = u_run[j]
+                frac = before / (before - after) if before > 0 else 0.0
+                tstar[node] = t_old + frac * dt
+                for k in range(ndim):
+                    tgrad[node * ndim + k] = 0.5 * (pl[k, j] + pr[k, j])
+
+
+@njit(cache=True)
+def max_abs_difference(a, b):
+    """``max |a - b|`` over two flat arrays."""
+    mx = 0.0
+    for i in range(a.shape[0]):
+        mx = max(mx, abs(np.float64(a[i]) - np.float64(b[i])))
+    return mx
+
+
+@njit(cache=True)
+def max_rate(shape, lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b):
+    """``max over nodes of sum_k alpha_k / dx_k`` for control-affine dynamics,
+    the rate that bounds the CFL time step."""
+    ndim = shape.shape[0]
+    size = 1
+    for k in range(ndim):
+        size *= shape[k]
+    m = u_a.shape[0]
+    q = d_a.shape[0]
+    x = np.empty(ndim)
+    f0 = np.empty(ndim)
+    G = np.empty((ndim, m))
+    K = np.empty((ndim, q))
+    umax = np.empty(m)
+    dmax = np.empty(q)
+    _input_bounds(u_kind, u_a, u_b, umax)
+    _input_bounds(d_kind, d_a, d_b, dmax)
+    best = 0.0
+    for flat in range(size):
+        rest = flat
+        for k in range(ndim - 1, -1, -1):
+            x[k] = lo[k] + (rest % shape[k]) * dx[k]
+            rest //= shape[k]
+        dyn(x, f0, G, K)
+        rate = 0.0
+        for k in range(ndim):
+            rate += _dissipation_coefficient(k, f0, G, K, umax, dmax) / dx[k]
+        best = max(best, rate)
+    return best
