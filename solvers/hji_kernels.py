@@ -311,7 +311,7 @@ def _stencil(v, base, n, k, idx, shape, w, sign, ghosts):
 
 @njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
 def stage(
-    first, stop, v, u0, out, a, b, dt, final, target, avoid, has_avoid, shape, inv_dx, order, consts,
+    first, stop, v, u0, out, a, b, dt, final, monotone, target, avoid, has_avoid, shape, inv_dx, order, consts,
     edge_sign, kind, axis_player, player_sign, speed, speed_offset, speed_stride,
     lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
     record, t_old, tstar, tgrad,
@@ -319,8 +319,9 @@ def stage(
     """One Runge-Kutta stage in Shu-Osher form on planes ``first`` to
     ``stop - 1`` of padded arrays: ``out = a u0 + b (v + dt L(v))`` with
     ``L`` the Lax-Friedrichs numerical Hamiltonian of backward time, ghosts
-    of ``out`` refreshed. The last stage of a step (``final``) also applies
-    the reach-avoid clamp ``max(min(out, target), -avoid)`` and, if
+    of ``out`` refreshed. The last stage of a step (``final``) also keeps
+    ``out <= u0`` if ``monotone``, applies the reach-avoid clamp
+    ``max(min(out, target), -avoid)`` and, if
     ``record``, stamps T* and the gradient (unpadded arrays) on nodes
     entering the set. It releases the GIL so that threads can share the
     planes: numba's own parallel loops would double the cold compile time."""
@@ -361,6 +362,9 @@ def stage(
         for j in range(n):
             o_run[j] = a * u_run[j] + b * (centre[j] + dt * dv[j])
         if final:
+            if monotone:
+                for j in range(n):
+                    o_run[j] = min(o_run[j], u_run[j])
             t_run = target[base : base + n]
             for j in range(n):
                 o_run[j] = min(o_run[j], t_run[j])

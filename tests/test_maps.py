@@ -10,7 +10,7 @@ from shapely.geometry import Point, box
 
 from maps import ROLES, Map, MapError, Region, Zone, list_maps, load_map, rasterize
 
-BUILT_IN = ["campus-200", "campus-400", "field-50", "field-80x40", "maze-10", "square-10", "triangle-10"]
+BUILT_IN = ["campus-200", "campus-400", "ctf-10", "field-50", "field-80x40", "maze-10", "square-10", "triangle-10"]
 ORIGIN = (37.8719, -122.2585)
 
 

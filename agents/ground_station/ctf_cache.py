@@ -1,0 +1,168 @@
+"""Solved capture-the-flag sets on disk, so the ground station and the CLI
+solve a game once and load it in milliseconds afterwards.
+
+Each set (R_A, F_A, W_A) is one ``.npy`` file, memory-mapped on load, with a
+``.json`` beside it saying how its solve went. Its key hashes everything
+that decides its values: the map's full GeoJSON, the grid, the speeds,
+capture radius and horizon that set depends on, the scheme, tolerance and
+precision, the file format and the package version; W_A's key includes R_A's.
+So two games that share a flag-return stage share its file, and any change
+to the inputs misses the cache rather than loading a stale answer. The
+directory is safe to delete; a damaged entry is logged and solved again.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import logging
+import os
+import tempfile
+from dataclasses import asdict, dataclass
+from importlib import metadata
+from pathlib import Path
+
+import numpy as np
+
+from agents.ground_station.ctf_arena import ctf_arena
+from maps import Map
+from maps.geojson import dumps
+from solvers.ctf import STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
+
+log = logging.getLogger(__name__)
+
+CACHE_ENV = "BEARCAT_CACHE_DIR"
+FORMAT = 1
+
+
+def cache_root() -> Path:
+    """``$BEARCAT_CACHE_DIR``, else ``$XDG_CACHE_HOME/bearcat``, else ``~/.cache/bearcat``."""
+    if os.environ.get(CACHE_ENV):
+        return Path(os.environ[CACHE_ENV])
+    base = os.environ.get("XDG_CACHE_HOME") or Path.home() / ".cache"
+    return Path(base) / "bearcat"
+
+
+@dataclass(frozen=True)
+class CtfGame:
+    """One capture-the-flag game as a user names it."""
+
+    map: Map
+    grid_points: int
+    rules: Rules
+    scheme: str = "weno5"
+    tol: float = 0.2
+    dtype: str = "float32"
+
+    def set_key(self, name: str) -> str:
+        """The cache key of set ``name`` (``return``, ``capture`` or ``win``)."""
+        horizon = self.rules.return_time if name == "return" else self.rules.capture_time
+        rules = {k: v for k, v in asdict(self.rules).items() if k not in ("return_time", "capture_time")}
+        inputs = {
+            "format": FORMAT,
+            "version": _version(),
+            "set": name,
+            "map": dumps(self.map, units="metres"),
+            "grid_points": self.grid_points,
+            "rules": rules,
+            "horizon": horizon,
+            "scheme": self.scheme,
+            "tol": self.tol,
+            "dtype": self.dtype,
+            "after": self.set_key("return") if name == "win" else None,
+        }
+        return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:32]
+
+
+@dataclass(frozen=True)
+class Solved:
+    """A solution and, per set, where it came from (``"cache"`` or ``"solved"``) and its file."""
+
+    solution: CtfSolution
+    sources: dict[str, str]
+    paths: dict[str, Path]
+
+
+def load_or_solve(
+    game: CtfGame,
+    stages: str = "both",
+    *,
+    root: Path | None = None,
+    use_cache: bool = True,
+    progress: ProgressCallback | None = None,
+) -> Solved:
+    """The sets of ``stages``, from the cache where present, solved (and
+    stored) where not."""
+    directory = (root or cache_root()) / "ctf"
+    arena = ctf_arena(game.map, game.grid_points)
+    known, sources, paths = {}, {}, {}
+    for name in STAGES.get(stages, ()):
+        paths[name] = directory / f"{game.set_key(name)}.npy"
+        if use_cache:
+            loaded = _load(paths[name], arena.joint_grid().shape)
+            if loaded is not None:
+                known[name] = loaded
+                sources[name] = "cache"
+    solution = solve_ctf(
+        arena, game.rules, stages, scheme=game.scheme, dtype=np.dtype(game.dtype), tol=game.tol,
+        known={name: s.value for name, s in known.items()}, progress=progress,
+    )  # fmt: skip
+    sets = dict(solution.sets)
+    for name, solved in solution.sets.items():
+        if name in known:
+            sets[name] = known[name]
+            continue
+        sources[name] = "solved"
+        if use_cache:
+            _store(paths[name], solved)
+    return Solved(CtfSolution(arena, game.rules, sets), sources, paths)
+
+
+def _version() -> str:
+    try:
+        return metadata.version("bearcat")
+    except metadata.PackageNotFoundError:
+        return "unknown"
+
+
+def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
+    meta_path = path.with_suffix(".json")
+    if not (path.exists() and meta_path.exists()):
+        return None
+    try:
+        meta = json.loads(meta_path.read_text())
+        value = np.load(path, mmap_mode="r")
+        if value.shape != shape:
+            raise ValueError(f"shape {value.shape}, expected {shape}")
+        return SetSolution(
+            meta["name"], value, bool(meta["converged"]), meta["converged_at"], float(meta["time"]), int(meta["steps"])
+        )
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        log.warning("cached set %s is unreadable (%s); solving it again", path, exc)
+        return None
+
+
+def _store(path: Path, solved: SetSolution) -> None:
+    """Write value then metadata, each through a temporary file renamed into
+    place, so a reader never sees half a file and an entry without its
+    metadata counts as missing."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    meta = {
+        "name": solved.name,
+        "converged": solved.converged,
+        "converged_at": solved.converged_at,
+        "time": solved.time,
+        "steps": solved.steps,
+    }
+    for target, write in (
+        (path, lambda f: np.save(f, np.asarray(solved.value))),
+        (path.with_suffix(".json"), lambda f: f.write(json.dumps(meta).encode())),
+    ):
+        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".partial-")
+        try:
+            with os.fdopen(handle, "wb") as f:
+                write(f)
+            os.replace(temporary, target)
+        except BaseException:
+            Path(temporary).unlink(missing_ok=True)
+            raise

@@ -1,0 +1,230 @@
+"""Live guidance from a solved capture-the-flag game: what the phones of
+thesis 3.5 showed, answered for the current positions.
+
+For a state ``(x_a, x_d)`` and the phase of play (``"capture"`` until the
+attacker holds the flag, ``"return"`` after), ``Guidance`` gives the value
+(the margin, in metres: negative where the attacker wins), the winner, each
+side's optimal heading (eqs. 3.12-3.13 from the value's gradient) and the
+opponent's winning region on the map: ``R_D(x_a)``, the defender positions
+that win against the attacker where it stands, and ``R_A(x_d)``, the
+attacker positions that win against the defender (Fig. 3.6, 3.9). Regions
+come as a 2-D mask on the arena grid and as polygons in map metres traced at
+the zero level of the interpolated value, so their edges sit between nodes.
+
+Values are multilinear in the 4-D grid; gradients are central differences
+at the nodes (one-sided on the edges), interpolated the same way, which
+keeps headings continuous inside a cell. A state off the grid or inside an
+obstacle is refused rather than extrapolated.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import contourpy
+import numba
+import numpy as np
+import shapely
+
+from solvers.ctf import CtfSolution, SetSolution
+from solvers.errors import InputError
+
+__all__ = ["Guidance", "StateReport", "PHASES"]
+
+PHASES = ("capture", "return")
+
+
+@dataclass(frozen=True)
+class StateReport:
+    """The game at one state. ``value`` <= 0: the attacker wins with optimal
+    play. Headings are unit vectors (east, north), None where the value is
+    flat and no direction is better than another."""
+
+    value: float
+    attacker_heading: tuple[float, float] | None
+    defender_heading: tuple[float, float] | None
+
+    @property
+    def winner(self) -> str:
+        return "attacker" if self.value <= 0 else "defender"
+
+
+class Guidance:
+    """Queries on one solved game; cheap enough to answer every player ten
+    times a second (see ``benchmarks/hji.py``)."""
+
+    def __init__(self, solution: CtfSolution) -> None:
+        self.solution = solution
+        self.arena = solution.arena
+        grid = self.arena.grid
+        self._lo = np.asarray(grid.lo * 2, np.float64)
+        self._spacing = np.asarray(grid.spacing * 2, np.float64)
+        self._axes = grid.axes()
+
+    def value_set(self, phase: str) -> SetSolution:
+        """The set that decides the rest of the game in ``phase``: W_A (or
+        F_A) before the flag is taken, R_A after."""
+        sets = self.solution.sets
+        if phase == "return":
+            if "return" not in sets:
+                raise InputError("the flag-return phase needs R_A; solve the game with stages 'return' or 'both'")
+            return sets["return"]
+        if phase == "capture":
+            for name in ("win", "capture"):
+                if name in sets:
+                    return sets[name]
+            raise InputError("the flag-capture phase needs W_A or F_A; solve the game with stages 'both' or 'capture'")
+        raise InputError(f"phase must be one of {', '.join(PHASES)}, got {phase!r}")
+
+    def check_state(self, attacker, defender) -> np.ndarray:
+        """The joint state as a float array, or an InputError naming the
+        player that is off the grid or inside an obstacle."""
+        return np.concatenate([self.check_point("attacker", attacker), self.check_point("defender", defender)])
+
+    def check_point(self, who: str, point) -> np.ndarray:
+        try:
+            x, y = (float(v) for v in point)
+        except (TypeError, ValueError):
+            raise InputError(f"{who} position {point!r} is not a pair of numbers (x, y)") from None
+        if not self.arena.grid.contains((x, y)):
+            (xmin, ymin), (xmax, ymax) = self.arena.grid.lo, self.arena.grid.hi
+            raise InputError(
+                f"{who} at ({x:.2f}, {y:.2f}) is off the game's grid [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}]"
+            )
+        if self.blocked_at((x, y)):
+            raise InputError(f"{who} at ({x:.2f}, {y:.2f}) is inside an obstacle or outside the area")
+        return np.array([x, y])
+
+    def blocked_at(self, point) -> bool:
+        g = self.arena.grid
+        distance = interpolate_2d(self.arena.blocked, np.asarray(g.lo), np.asarray(g.spacing), np.asarray(point, float))
+        return distance < -1e-3 * min(g.spacing)
+
+    def evaluate(self, attacker, defender, phase: str = "capture") -> StateReport:
+        """Value and optimal headings at the state."""
+        state = self.check_state(attacker, defender)
+        value, gradient = _value_and_gradient(self.value_set(phase).value, self._lo, self._spacing, state)
+        return StateReport(float(value), _unit(-gradient[:2]), _unit(gradient[2:]))
+
+    def defender_region_values(self, attacker, phase: str = "capture") -> np.ndarray:
+        """The value over defender positions with the attacker held at
+        ``attacker``: ``> 0`` is R_D(x_a) (or F_D, W_D by phase)."""
+        point = self.check_point("attacker", attacker)
+        return _slice(self.value_set(phase).value, self._lo[:2], self._spacing[:2], point, True)
+
+    def attacker_region_values(self, defender, phase: str = "capture") -> np.ndarray:
+        """The value over attacker positions with the defender held at
+        ``defender``: ``<= 0`` is R_A(x_d) (or F_A, W_A by phase)."""
+        point = self.check_point("defender", defender)
+        return _slice(self.value_set(phase).value, self._lo[2:], self._spacing[2:], point, False)
+
+    def defender_region(self, attacker, phase: str = "capture") -> np.ndarray:
+        """R_D(x_a) as a mask over the arena grid."""
+        return self.defender_region_values(attacker, phase) > 0
+
+    def attacker_region(self, defender, phase: str = "capture") -> np.ndarray:
+        """R_A(x_d) as a mask over the arena grid."""
+        return self.attacker_region_values(defender, phase) <= 0
+
+    def polygons(self, values: np.ndarray, side: str):
+        """The region ``values <= 0`` (``side="attacker"``) or ``values > 0``
+        (``"defender"``) of a slice as a shapely (Multi)Polygon in map
+        metres, traced at the zero level with holes where it has them."""
+        if side not in ("attacker", "defender"):
+            raise InputError(f"side must be 'attacker' or 'defender', got {side!r}")
+        x, y = self._axes
+        generator = contourpy.contour_generator(x, y, np.asarray(values, np.float64).T, fill_type="OuterOffset")
+        finite = float(np.max(np.abs(values))) + 1.0
+        lower, upper = (-finite, 0.0) if side == "attacker" else (0.0, finite)
+        points, offsets = generator.filled(lower, upper)
+        shapes = []
+        for outline, cuts in zip(points, offsets):
+            rings = [outline[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b - a >= 4]
+            if rings:
+                shapes.append(shapely.Polygon(rings[0], rings[1:]))
+        return shapely.MultiPolygon(shapes) if shapes else shapely.MultiPolygon()
+
+
+def _unit(v: np.ndarray) -> tuple[float, float] | None:
+    norm = math.hypot(float(v[0]), float(v[1]))
+    if norm < 1e-9:
+        return None
+    return float(v[0]) / norm, float(v[1]) / norm
+
+
+@numba.njit(cache=True)
+def interpolate_2d(a, lo, spacing, point):
+    """Bilinear value of the 2-D nodal array ``a`` at ``point``, clamped to the grid."""
+    n0, n1 = a.shape
+    f0 = min(max((point[0] - lo[0]) / spacing[0], 0.0), n0 - 1.0)
+    f1 = min(max((point[1] - lo[1]) / spacing[1], 0.0), n1 - 1.0)
+    i0, i1 = min(int(f0), n0 - 2), min(int(f1), n1 - 2)
+    t0, t1 = f0 - i0, f1 - i1
+    return ((1 - t0) * ((1 - t1) * a[i0, i1] + t1 * a[i0, i1 + 1])
+            + t0 * ((1 - t1) * a[i0 + 1, i1] + t1 * a[i0 + 1, i1 + 1]))  # fmt: skip
+
+
+@numba.njit(cache=True)
+def _node_derivative(v, idx, axis, spacing, n):
+    """Central difference of ``v`` along ``axis`` at node ``idx``, one-sided on the edges."""
+    lo_idx = idx.copy()
+    hi_idx = idx.copy()
+    if idx[axis] > 0:
+        lo_idx[axis] -= 1
+    if idx[axis] < n[axis] - 1:
+        hi_idx[axis] += 1
+    span = (hi_idx[axis] - lo_idx[axis]) * spacing[axis]
+    return (v[hi_idx[0], hi_idx[1], hi_idx[2], hi_idx[3]] - v[lo_idx[0], lo_idx[1], lo_idx[2], lo_idx[3]]) / span
+
+
+@numba.njit(cache=True)
+def _value_and_gradient(v, lo, spacing, state):
+    n = np.array(v.shape)
+    base = np.empty(4, np.int64)
+    frac = np.empty(4)
+    for k in range(4):
+        f = min(max((state[k] - lo[k]) / spacing[k], 0.0), n[k] - 1.0)
+        base[k] = min(int(f), n[k] - 2)
+        frac[k] = f - base[k]
+    value = 0.0
+    gradient = np.zeros(4)
+    idx = np.empty(4, np.int64)
+    for corner in range(16):
+        w = 1.0
+        for k in range(4):
+            bit = (corner >> k) & 1
+            idx[k] = base[k] + bit
+            w *= frac[k] if bit else 1.0 - frac[k]
+        if w == 0.0:
+            continue
+        value += w * v[idx[0], idx[1], idx[2], idx[3]]
+        for k in range(4):
+            gradient[k] += w * _node_derivative(v, idx, k, spacing, n)
+    return value, gradient
+
+
+@numba.njit(cache=True)
+def _slice(v, lo, spacing, point, held_first):
+    """The 2-D slice of ``v`` with the first (``held_first``) or last two
+    axes held at ``point``, bilinear in the held axes."""
+    n = v.shape
+    h0, h1 = (0, 1) if held_first else (2, 3)
+    f0 = min(max((point[0] - lo[0]) / spacing[0], 0.0), n[h0] - 1.0)
+    f1 = min(max((point[1] - lo[1]) / spacing[1], 0.0), n[h1] - 1.0)
+    i0, i1 = min(int(f0), n[h0] - 2), min(int(f1), n[h1] - 2)
+    t0, t1 = f0 - i0, f1 - i1
+    w00, w01, w10, w11 = (1 - t0) * (1 - t1), (1 - t0) * t1, t0 * (1 - t1), t0 * t1
+    if held_first:
+        out = np.empty((n[2], n[3]))
+        for a in range(n[2]):
+            for b in range(n[3]):
+                out[a, b] = (w00 * v[i0, i1, a, b] + w01 * v[i0, i1 + 1, a, b]
+                             + w10 * v[i0 + 1, i1, a, b] + w11 * v[i0 + 1, i1 + 1, a, b])  # fmt: skip
+    else:
+        out = np.empty((n[0], n[1]))
+        for a in range(n[0]):
+            for b in range(n[1]):
+                out[a, b] = (w00 * v[a, b, i0, i1] + w01 * v[a, b, i0, i1 + 1]
+                             + w10 * v[a, b, i0 + 1, i1] + w11 * v[a, b, i0 + 1, i1 + 1])  # fmt: skip
+    return out
