@@ -71,3 +71,79 @@ def openloop_figure(
     verdict = "safe path found" if solution.reached else f"no safe path (stage {report['blocked_stage']})"
     fig.suptitle(f"open-loop reach-avoid on {game_map.name}: {verdict}")
     return fig
+
+
+def _region(ax, guidance, values: np.ndarray, side: str, colour: str, label: str) -> None:
+    """Fill a slice's region (``values <= 0`` for the attacker's, ``> 0``
+    for the defender's) with its zero level as the edge."""
+    x, y = guidance.arena.grid.axes()
+    finite = float(np.max(np.abs(values))) + 1.0
+    levels = [-finite, 0.0] if side == "attacker" else [0.0, finite]
+    ax.contourf(x, y, values.T, levels=levels, colors=[colour], alpha=0.35)
+    ax.contour(x, y, values.T, levels=[0.0], colors=[colour], linewidths=1.5)
+    ax.plot([], [], "s", color=colour, alpha=0.5, label=label)
+
+
+def _players(ax, attacker, defender, attacker_heading=None, defender_heading=None, scale=1.0) -> None:
+    ax.plot(*attacker, "o", color="tab:blue", markersize=10, markeredgecolor="white", label="attacker", zorder=5)
+    ax.plot(*defender, "^", color="tab:red", markersize=11, markeredgecolor="white", label="defender", zorder=5)
+    for (px, py), heading, colour in ((attacker, attacker_heading, "tab:blue"), (defender, defender_heading, "tab:red")):
+        if heading is not None:
+            ax.annotate("", xy=(px + scale * heading[0], py + scale * heading[1]), xytext=(px, py),
+                        arrowprops=dict(arrowstyle="-|>", color=colour, linewidth=2), zorder=6)  # fmt: skip
+
+
+def ctf_query_figure(game_map: Map, guidance, attacker, defender, report, phase, defender_values, attacker_values, set_name):
+    """What each phone shows (thesis Fig. 3.6, 3.9): on the attacker's, the
+    defender positions that win against it, R_D(x_a); on the defender's, the
+    attacker positions that win against it, R_A(x_d); each with its optimal
+    heading."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12.4, 6.6), layout="constrained")
+    xmin, ymin, xmax, ymax = game_map.bounds
+    scale = 0.08 * max(xmax - xmin, ymax - ymin)
+    defender_set = set_name.replace("_A", "_D")
+    for ax, values, side, colour, label, heading in (
+        (left, defender_values, "defender", "tab:red", f"{defender_set}(x_a): defender wins", "attacker"),
+        (right, attacker_values, "attacker", "tab:blue", f"{set_name}(x_d): attacker wins", "defender"),
+    ):
+        draw_map(ax, game_map, labels=True)
+        _region(ax, guidance, values, side, colour, label)
+        _players(ax, attacker, defender,
+                 report.attacker_heading if heading == "attacker" else None,
+                 report.defender_heading if heading == "defender" else None, scale)  # fmt: skip
+        ax.legend(loc="lower right", fontsize=8)
+        ax.set_title(f"{heading}'s view: {label}")
+    fig.suptitle(f"capture-the-flag on {game_map.name}, {phase} phase: {report.winner} wins, value {report.value:+.2f} m")
+    return fig
+
+
+def ctf_play_figure(game_map: Map, guidance, outcome, start):
+    """A closed-loop game as thesis Fig. 3.4/3.5: the defender's winning
+    region for the attacker's start, then both tracks (attacker solid,
+    defender dashed) with where the flag was taken."""
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12.4, 6.6), layout="constrained")
+    attacker, defender = outcome.attacker[0], outcome.defender[0]
+    phase = outcome.phases[0]
+    name = guidance.value_set(phase).name
+    region = {"win": "W_D", "capture": "F_D", "return": "R_D"}[name]
+    draw_map(left, game_map, labels=True)
+    _region(left, guidance, guidance.defender_region_values(attacker, phase), "defender", "tab:red",
+            f"{region}(x_a): defender wins")  # fmt: skip
+    _players(left, attacker, defender)
+    left.legend(loc="lower right", fontsize=8)
+    left.set_title(f"start: {start.winner} predicted to win (value {start.value:+.2f} m)")
+    draw_map(right, game_map, labels=True)
+    right.plot(outcome.attacker[:, 0], outcome.attacker[:, 1], "-", color="tab:blue", linewidth=2, label="attacker")
+    right.plot(outcome.defender[:, 0], outcome.defender[:, 1], "--", color="tab:red", linewidth=2, label="defender")
+    _players(right, attacker, defender)
+    right.plot(*outcome.attacker[-1], "o", color="tab:blue", markersize=6)
+    right.plot(*outcome.defender[-1], "^", color="tab:red", markersize=7)
+    if outcome.flag_time is not None:
+        k = int(np.searchsorted(outcome.times, outcome.flag_time))
+        right.plot(*outcome.attacker[k], "*", color="gold", markersize=16, markeredgecolor="black", label="flag taken")
+    handles, labels = right.get_legend_handles_labels()
+    unique = dict(zip(labels, handles))
+    right.legend(unique.values(), unique.keys(), loc="lower right", fontsize=8)
+    right.set_title(f"{outcome.winner} won: {outcome.reason} at {outcome.duration:.1f} s")
+    fig.suptitle(f"capture-the-flag on {game_map.name}: both players on the optimal strategies")
+    return fig

@@ -47,6 +47,7 @@ STAGES = {
     "return": ("return",),  # R_A only: the flag-return game of the field trials (3.5)
     "capture": ("capture",),  # F_A only
     "both": ("return", "win"),  # R_A, then W_A from it: the two-stage game
+    "all": ("return", "capture", "win"),  # and F_A, for an attacker that grabs the flag when W_A is lost
 }
 """What each ``stages`` choice solves, in order."""
 

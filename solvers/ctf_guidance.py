@@ -103,8 +103,17 @@ class Guidance:
 
     def evaluate(self, attacker, defender, phase: str = "capture") -> StateReport:
         """Value and optimal headings at the state."""
+        return self._report(self.value_set(phase), attacker, defender)
+
+    def evaluate_set(self, name: str, attacker, defender) -> StateReport:
+        """Value and headings of one solved set (``"return"``, ``"capture"`` or ``"win"``)."""
+        if name not in self.solution.sets:
+            raise InputError(f"the game was solved without set {name!r}; it has {', '.join(self.solution.sets)}")
+        return self._report(self.solution.sets[name], attacker, defender)
+
+    def _report(self, found: SetSolution, attacker, defender) -> StateReport:
         state = self.check_state(attacker, defender)
-        value, gradient = _value_and_gradient(self.value_set(phase).value, self._lo, self._spacing, state)
+        value, gradient = _value_and_gradient(found.value, self._lo, self._spacing, state)
         return StateReport(float(value), _unit(-gradient[:2]), _unit(gradient[2:]))
 
     def defender_region_values(self, attacker, phase: str = "capture") -> np.ndarray:

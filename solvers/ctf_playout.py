@@ -4,7 +4,9 @@ and the rules of 3.1.1 referee the result.
 
 The attacker plays the first-stage strategy (from W_A, or F_A) until it
 stands in the flag, then the flag-return strategy (from R_A): the switch of
-3.3.2. Each step moves a player at its top speed times the terrain factor
+3.3.2. Where W_A is lost but F_A is solved and won, the attacker still goes
+for the flag on the F_A strategy, as in thesis Fig. 3.5a: a defender that
+wins the whole game then lets it take the flag and blocks the return. Each step moves a player at its top speed times the terrain factor
 where it stands, forward Euler with a step of a quarter cell, so neither can
 jump a capture disk or an obstacle edge between referee checks.
 """
@@ -16,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from solvers.ctf_guidance import Guidance, interpolate_2d
+from solvers.ctf_guidance import Guidance, StateReport, interpolate_2d
 from solvers.errors import InputError
 
 __all__ = ["Playout", "play"]
@@ -105,6 +107,10 @@ def play(
         if winner is not None:
             break
         report = guidance.evaluate(xa, xd, phase)
+        if phase == "capture" and report.value > 0 and "win" in sets and "capture" in sets:
+            grab = guidance.evaluate_set("capture", xa, xd)
+            if grab.value <= 0:
+                report = StateReport(report.value, grab.attacker_heading, report.defender_heading)
         moves = []
         for who, policy, p, speed in (
             ("attacker", attacker_policy, xa, rules.attacker_speed),

@@ -27,7 +27,7 @@ import numpy as np
 from agents.ground_station.ctf_arena import ctf_arena
 from maps import Map
 from maps.geojson import dumps
-from solvers.ctf import STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
+from solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
 
 log = logging.getLogger(__name__)
 
@@ -51,7 +51,7 @@ class CtfGame:
     grid_points: int
     rules: Rules
     scheme: str = "weno5"
-    tol: float = 0.2
+    tol: float = DEFAULT_TOL
     dtype: str = "float32"
 
     def set_key(self, name: str) -> str:

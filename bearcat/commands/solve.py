@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from bearcat import arguments
+from bearcat.commands import ctf as ctf_command
 from maps import Map, MapError, Raster, load_map, rasterize
 from solvers.openloop import Defender, OpenLoopSolution, solve_openloop
 
@@ -105,6 +106,7 @@ def register(subparsers) -> None:
     openloop.add_argument("--plot", type=Path, metavar="PNG", help="write a figure of the sets and path")
     openloop.add_argument("--json", type=Path, metavar="FILE", help="write the result as JSON ('-' for stdout)")
     openloop.set_defaults(run=run_openloop)
+    ctf_command.register_solve(games)
 
 
 def stage_speeds(args, stages: int) -> list[float]:

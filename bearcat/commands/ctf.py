@@ -1,0 +1,293 @@
+"""``bearcat solve ctf``, ``bearcat query ctf`` and ``bearcat play ctf``: the
+1 vs 1 capture-the-flag game of thesis ch. 3 from the command line.
+
+All three take the same game options and share the on-disk cache, so a game
+is solved once and then queried and played in milliseconds.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+from bearcat import arguments
+from maps import load_map
+from agents.ground_station.ctf_cache import CtfGame, Solved, cache_root, load_or_solve
+from solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES, Rules
+from solvers.ctf_guidance import Guidance
+from solvers.ctf_playout import play
+from solvers.hji import SCHEMES
+
+DEFAULT_GRID = 45
+
+
+def add_game_options(parser: argparse.ArgumentParser) -> None:
+    game = parser.add_argument_group("the game")
+    game.add_argument("--map", required=True, help="built-in map name or path to a GeoJSON map with flag and return regions")
+    game.add_argument("--grid", type=int, default=DEFAULT_GRID, metavar="N",
+                      help=f"grid points per axis of each player's position (N^4 joint states; default {DEFAULT_GRID})")
+    game.add_argument("--stages", choices=tuple(STAGES), default="both",
+                      help="return: R_A only; capture: F_A only; both: R_A and the two-stage W_A (default); all: R_A, F_A and W_A")
+    game.add_argument("--scheme", choices=tuple(SCHEMES), default="weno5",
+                      help="weno5: WENO5 + RK3 (default, accurate); first: first-order upwind (fast, diffusive)")
+    game.add_argument("--attacker-speed", type=arguments.positive, default=1.0, metavar="V",
+                      help="attacker top speed in m/s on full-speed terrain (default 1)")
+    game.add_argument("--defender-speed", type=arguments.positive, default=1.0, metavar="V",
+                      help="defender top speed in m/s on full-speed terrain (default 1)")
+    game.add_argument("--capture-radius", type=arguments.non_negative, metavar="R",
+                      help="capture radius in m (default: 5%% of the map's longer side, 0.5 on a 10 m arena)")
+    game.add_argument("--capture-time", type=arguments.positive, metavar="T",
+                      help="time allowed for flag capture in s (default: 1.2 x the longer side / the slower speed)")
+    game.add_argument("--return-time", type=arguments.positive, metavar="T",
+                      help="time allowed for flag return in s (default as --capture-time)")
+    game.add_argument("--tol", type=arguments.positive, default=DEFAULT_TOL, metavar="CELLS",
+                      help=f"convergence tolerance in cells (default {DEFAULT_TOL})")
+    game.add_argument("--no-cache", action="store_true", help="solve afresh and store nothing")
+
+
+def register_solve(games) -> None:
+    """``solve ctf``, under the ``solve`` command's games."""
+    parser = games.add_parser(
+        "ctf",
+        help="1 vs 1 capture-the-flag: HJI winning sets, cached for queries",
+        description="Solve the flag-return set R_A, the flag-capture set F_A or the two-stage winning set W_A "
+        "(thesis 3.3) on a map and cache them on disk.",
+    )
+    add_game_options(parser)
+    parser.add_argument("--json", type=Path, metavar="FILE", help="write a summary as JSON ('-' for stdout)")
+    parser.set_defaults(run=run_solve)
+
+
+def register(subparsers) -> None:
+    """``query ctf`` and ``play ctf``."""
+    query = subparsers.add_parser("query", help="ask a solved game about a state")
+    query_games = query.add_subparsers(dest="game", metavar="GAME", required=True)
+    q = query_games.add_parser(
+        "ctf",
+        help="winner, margin, optimal headings and the opponent's winning region at a state",
+        description="Guidance for the current positions, as the phones of thesis 3.5 showed it. "
+        "Solves the game first if it is not cached.",
+    )
+    add_game_options(q)
+    _add_state_options(q)
+    q.add_argument("--phase", choices=("capture", "return"),
+                   help="capture: the attacker has not taken the flag; return: it has (default: the first stage solved)")
+    q.add_argument("--plot", type=Path, metavar="PNG", help="draw the state and both players' opponent regions")
+    q.add_argument("--json", type=Path, nargs="?", const=Path("-"), metavar="FILE",
+                   help="write the answer as JSON (to stdout without FILE)")
+    q.set_defaults(run=run_query)
+
+    playing = subparsers.add_parser("play", help="play a solved game out in closed loop")
+    play_games = playing.add_subparsers(dest="game", metavar="GAME", required=True)
+    p = play_games.add_parser(
+        "ctf",
+        help="both players follow the optimal strategies from a start state (thesis 3.4, Fig. 3.4-3.5)",
+        description="Closed-loop simulation: each player follows the heading of eqs. 3.12-3.13, the attacker "
+        "switching to the flag-return strategy once it holds the flag. Solves the game first if it is not cached.",
+    )
+    add_game_options(p)
+    _add_state_options(p)
+    p.add_argument("--plot", type=Path, metavar="PNG", help="draw the start's winning region and both tracks")
+    p.add_argument("--json", type=Path, nargs="?", const=Path("-"), metavar="FILE",
+                   help="write the tracks and outcome as JSON (to stdout without FILE)")
+    p.set_defaults(run=run_play)
+
+
+def _add_state_options(parser) -> None:
+    parser.add_argument("--attacker", required=True, type=arguments.point, metavar="X,Y", help="attacker position (m)")
+    parser.add_argument("--defender", required=True, type=arguments.point, metavar="X,Y", help="defender position (m)")
+
+
+def game_from_args(args) -> CtfGame:
+    game_map = load_map(args.map)
+    xmin, ymin, xmax, ymax = game_map.bounds
+    side = max(xmax - xmin, ymax - ymin)
+    horizon = 1.2 * side / min(args.attacker_speed, args.defender_speed)
+    rules = Rules(
+        attacker_speed=args.attacker_speed,
+        defender_speed=args.defender_speed,
+        capture_radius=0.05 * side if args.capture_radius is None else args.capture_radius,
+        capture_time=args.capture_time or horizon,
+        return_time=args.return_time or args.capture_time or horizon,
+    )
+    if args.grid < 9:
+        raise arguments.UsageError(f"--grid {args.grid} is too coarse; use at least 9 points per axis")
+    return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol)
+
+
+def solve_game(args) -> tuple[CtfGame, Solved, float]:
+    """Load or solve the game the options name, with a progress bar on stderr for sets being solved."""
+    from tqdm import tqdm
+
+    game = game_from_args(args)
+    bars: dict[str, tqdm] = {}
+
+    def progress(name: str, t: float, horizon: float, change: float) -> None:
+        bar = bars.get(name)
+        if bar is None:
+            for finished in bars.values():
+                finished.close()
+            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"{SET_NAMES[name]} ", unit="s", file=sys.stderr,
+                                    bar_format="{desc}{percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s game time "
+                                    "[{elapsed}<{remaining}{postfix}]")  # fmt: skip
+        bar.update(round(t - bar.n, 2))
+        bar.set_postfix_str(f"change {change:.3g} m")
+
+    started = time.perf_counter()
+    try:
+        solved = load_or_solve(game, args.stages, use_cache=not args.no_cache, progress=progress)
+    finally:
+        for bar in bars.values():
+            bar.close()
+    return game, solved, time.perf_counter() - started
+
+
+def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
+    rows = []
+    arena = solved.solution.arena
+    free = arena.free
+    joint_free = free[:, :, None, None] & free[None, None, :, :]
+    for name, found in solved.solution.sets.items():
+        wins = (found.value <= 0) & joint_free
+        rows.append({
+            "set": SET_NAMES[name],
+            "attacker_wins_fraction": round(float(wins.sum() / joint_free.sum()), 4),
+            "converged": found.converged,
+            "converged_at_s": found.converged_at,
+            "horizon_s": game.rules.return_time if name == "return" else game.rules.capture_time,
+            "steps": found.steps,
+            "source": solved.sources[name],
+            "file": str(solved.paths[name]) if name in solved.paths else None,
+        })  # fmt: skip
+    return rows
+
+
+def run_solve(args) -> int:
+    game, solved, seconds = solve_game(args)
+    rules, n = game.rules, game.grid_points
+    print(f"capture-the-flag on {game.map.name}: {n}^4 = {n**4:,} joint states, {game.scheme}, "
+          f"speeds {rules.attacker_speed:g}/{rules.defender_speed:g} m/s, capture radius {rules.capture_radius:g} m")  # fmt: skip
+    rows = set_summary(game, solved)
+    for row in rows:
+        if row["source"] == "cache":
+            how = "loaded from cache"
+        elif row["converged"]:
+            how = f"converged at {row['converged_at_s']:.1f} s of game time, {row['steps']} steps"
+        else:
+            how = f"NOT converged within {row['horizon_s']:g} s ({row['steps']} steps); raise the horizon"
+        print(f"{row['set']}: attacker wins from {100 * row['attacker_wins_fraction']:.1f}% of free joint states; {how}")
+    print(f"{seconds:.2f} s wall; cache {cache_root()}")
+    if args.json is not None:
+        _write_json(args.json, {
+            "map": game.map.name, "grid": n, "scheme": game.scheme, "rules": asdict(rules),
+            "sets": rows, "seconds": round(seconds, 3),
+        })  # fmt: skip
+    return 0
+
+
+def bearing_deg(heading) -> float | None:
+    """Degrees clockwise from north, as the phones show a heading."""
+    if heading is None:
+        return None
+    return round(math.degrees(math.atan2(heading[0], heading[1])) % 360.0, 2)
+
+
+def run_query(args) -> int:
+    game, solved, seconds = solve_game(args)
+    guidance = Guidance(solved.solution)
+    phase = args.phase or ("return" if args.stages == "return" else "capture")
+    report = guidance.evaluate(args.attacker, args.defender, phase)
+    defender_values = guidance.defender_region_values(args.attacker, phase)
+    attacker_values = guidance.attacker_region_values(args.defender, phase)
+    defender_polygons = guidance.polygons(defender_values, "defender")
+    attacker_polygons = guidance.polygons(attacker_values, "attacker")
+    name = SET_NAMES[guidance.value_set(phase).name]
+    answer = {
+        "map": game.map.name,
+        "phase": phase,
+        "set": name,
+        "attacker": list(args.attacker),
+        "defender": list(args.defender),
+        "winner": report.winner,
+        "value_m": round(report.value, 4),
+        "attacker_heading": _heading_json(report.attacker_heading),
+        "defender_heading": _heading_json(report.defender_heading),
+        "defender_region_area_m2": round(defender_polygons.area, 2),
+        "attacker_region_area_m2": round(attacker_polygons.area, 2),
+    }
+    print(f"{report.winner} wins ({name}, {phase} phase): value {report.value:+.3f} m "
+          f"({'attacker margin' if report.value <= 0 else 'defender margin'} {abs(report.value):.3f} m)")  # fmt: skip
+    for who in ("attacker", "defender"):
+        h = answer[f"{who}_heading"]
+        text = "none (the value is flat here)" if h is None else f"{h['bearing_deg']:.1f} deg from north"
+        print(f"{who} optimal heading: {text}")
+    print(f"defender's winning region for this attacker position: {answer['defender_region_area_m2']:.1f} m^2; "
+          f"attacker's for this defender position: {answer['attacker_region_area_m2']:.1f} m^2")  # fmt: skip
+    if args.json is not None:
+        answer["regions"] = {
+            "defender": _polygons_json(defender_polygons),
+            "attacker": _polygons_json(attacker_polygons),
+        }
+        _write_json(args.json, answer)
+    if args.plot is not None:
+        from bearcat.figures import ctf_query_figure
+
+        fig = ctf_query_figure(game.map, guidance, args.attacker, args.defender, report, phase,
+                               defender_values, attacker_values, name)  # fmt: skip
+        fig.savefig(args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def run_play(args) -> int:
+    game, solved, _ = solve_game(args)
+    guidance = Guidance(solved.solution)
+    outcome = play(guidance, args.attacker, args.defender)
+    start = guidance.evaluate(args.attacker, args.defender, outcome.phases[0])
+    print(f"start: value {start.value:+.3f} m, {start.winner} predicted to win")
+    flag = "" if outcome.flag_time is None else f", flag taken at {outcome.flag_time:.2f} s"
+    print(f"{outcome.winner} won ({outcome.reason}) after {outcome.duration:.2f} s{flag}")
+    if args.json is not None:
+        _write_json(args.json, {
+            "map": game.map.name, "predicted_winner": start.winner, "value_m": round(start.value, 4),
+            "winner": outcome.winner, "reason": outcome.reason, "duration_s": round(outcome.duration, 3),
+            "flag_time_s": None if outcome.flag_time is None else round(outcome.flag_time, 3),
+            "times_s": [round(float(t), 3) for t in outcome.times],
+            "attacker": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.attacker],
+            "defender": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.defender],
+        })  # fmt: skip
+    if args.plot is not None:
+        from bearcat.figures import ctf_play_figure
+
+        fig = ctf_play_figure(game.map, guidance, outcome, start)
+        fig.savefig(args.plot, dpi=110)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+def _heading_json(heading) -> dict | None:
+    if heading is None:
+        return None
+    return {"east": round(heading[0], 5), "north": round(heading[1], 5), "bearing_deg": bearing_deg(heading)}
+
+
+def _polygons_json(shape) -> list:
+    """Outer ring and holes of each polygon, in map metres."""
+    return [
+        [[[round(x, 3), round(y, 3)] for x, y in ring.coords] for ring in (p.exterior, *p.interiors)]
+        for p in shape.geoms
+    ]
+
+
+def _write_json(target: Path, data: dict) -> None:
+    text = json.dumps(data, indent=2)
+    if str(target) == "-":
+        print(text)
+    else:
+        target.write_text(text + "\n")
+        print(f"wrote {target}")
