@@ -1,7 +1,8 @@
 """Time bearcat's HJI level-set solver against hj_reachability on the same
 problem, scheme, grid, CFL number, boundary rule and horizon.
 
-    python benchmarks/hji.py            # 45^4 over 6 time units, then ours to convergence and at 65^4
+    python benchmarks/hji.py            # 45^4 over 6 time units, then ours to convergence and at 65^4,
+                                        # then the two-stage game at 45^4 and 65^4 with query timings
     python benchmarks/hji.py --quick    # 21^4 over 2 time units, a few seconds per run
 
 Needs ``pip install jax hj-reachability`` (JAX on the CPU). Every solve runs in
@@ -57,9 +58,13 @@ def run_ours(n: int, scheme: str, horizon: float, tol: float) -> dict:
     grid, target, avoid = problem(n)
     game = SimpleMotion.pursuit(1.0, 1.0)
     small, small_target, small_avoid = problem(9)
-    solve_reach_avoid(small, game, small_target, small_avoid, horizon=0.1, scheme=scheme)
+    # Against hj_reachability the steps must be the same arithmetic, so the
+    # monotone clamp (which hj_reachability lacks) is off there; the
+    # convergence runs (tol > 0) use the solver's default.
+    monotone = tol > 0
+    solve_reach_avoid(small, game, small_target, small_avoid, horizon=0.1, scheme=scheme, monotone=monotone)
     start = time.perf_counter()
-    result = solve_reach_avoid(grid, game, target, avoid, horizon=horizon, scheme=scheme, tol=tol)
+    result = solve_reach_avoid(grid, game, target, avoid, horizon=horizon, scheme=scheme, tol=tol, monotone=monotone)
     seconds = time.perf_counter() - start
     return {
         "seconds": seconds,
@@ -122,7 +127,54 @@ def run_hj(n: int, scheme: str, horizon: float) -> dict:
             "converged_at": None, "set": final <= 0}  # fmt: skip
 
 
+GAME_MAP, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON = "field-50", 3.0, 2.5, 60.0
+
+
+def run_game(n: int) -> dict:
+    """The two-stage game (R_A, then W_A) on field-50 to convergence, then
+    the guidance queries of one ground-station tick on it."""
+    from agents.ground_station.ctf_arena import ctf_arena
+    from maps import load_map
+    from solvers.ctf import Rules, solve_ctf
+    from solvers.ctf_guidance import Guidance
+
+    rules = Rules(GAME_SPEED, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON, GAME_HORIZON)
+    game_map = load_map(GAME_MAP)
+    solve_ctf(ctf_arena(game_map, 9), rules, "both")  # load the compiled kernels
+    arena = ctf_arena(game_map, n)
+    start = time.perf_counter()
+    solution = solve_ctf(arena, rules, "both")
+    seconds = time.perf_counter() - start
+    guidance = Guidance(solution)
+    rng = np.random.default_rng(0)
+    states = rng.uniform(0.0, 50.0, size=(200, 4))
+    timings = {"evaluate": [], "slices": [], "polygons": []}
+    for k, state in enumerate(states):
+        a, d = state[:2], state[2:]
+        t0 = time.perf_counter()
+        guidance.evaluate(a, d)
+        t1 = time.perf_counter()
+        rd, ra = guidance.defender_region_values(a), guidance.attacker_region_values(d)
+        t2 = time.perf_counter()
+        guidance.polygons(rd, "defender"), guidance.polygons(ra, "attacker")
+        t3 = time.perf_counter()
+        if k >= 10:  # the first calls load compiled code
+            for key, dt in zip(timings, (t1 - t0, t2 - t1, t3 - t2)):
+                timings[key].append(dt * 1e3)
+    return {
+        "seconds": seconds,
+        "sets": {name: {"converged_at": s.converged_at, "steps": s.steps, "wins": float(s.attacker_wins.mean())}
+                 for name, s in solution.sets.items()},
+        "query_ms": {key: float(np.median(v)) for key, v in timings.items()},
+    }
+
+
 def child(args) -> None:
+    if args.solver == "game":
+        out = run_game(args.n)
+        out["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+        print(json.dumps(out))
+        return
     if args.solver == "ours":
         out = run_ours(args.n, args.scheme, args.horizon, args.tol)
     else:
@@ -155,7 +207,7 @@ def row(label: str, n: int, r: dict, ratio: str = "", disagree: str = "") -> str
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="21^4 over 2 time units")
-    parser.add_argument("--child", choices=("ours", "hj"), dest="solver", help=argparse.SUPPRESS)
+    parser.add_argument("--child", choices=("ours", "hj", "game"), dest="solver", help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, default=45, help=argparse.SUPPRESS)
     parser.add_argument("--scheme", default="weno5", help=argparse.SUPPRESS)
     parser.add_argument("--horizon", type=float, default=6.0, help=argparse.SUPPRESS)
@@ -187,6 +239,19 @@ def main() -> None:
             big = measure("ours", 65, "weno5", 1.0, 0.0, os.path.join(tmp, "big.npy"))
             print(row("bearcat weno5 (memory)", 65, big), flush=True)
     print("ns/n/st: nanoseconds per grid node per time step; disagree: fraction of nodes whose membership differs")
+    print()
+    print(f"two-stage capture-the-flag on {GAME_MAP} (R_A then W_A), WENO5 to convergence, speeds {GAME_SPEED} m/s, "
+          f"r_c {GAME_CAPTURE_RADIUS} m, horizons {GAME_HORIZON} s; guidance query medians over 190 random states")
+    print(f"{'grid':>6} {'seconds':>8} {'peak MB':>8} {'R_A conv s':>10} {'W_A conv s':>10} "
+          f"{'value ms':>9} {'slices ms':>9} {'polys ms':>9} {'total ms':>9}")  # fmt: skip
+    for n_game in (21,) if args.quick else (45, 65):
+        with tempfile.TemporaryDirectory() as tmp:
+            r = measure("game", n_game, "weno5", 0.0, 0.0, os.path.join(tmp, "unused.npy"))
+        conv = [r["sets"][k]["converged_at"] for k in ("return", "win")]
+        q = r["query_ms"]
+        print(f"{n_game:>4}^4 {r['seconds']:>8.1f} {r['peak_mb']:>8.0f} "
+              + " ".join(f"{c:>10.1f}" if c else f"{'-':>10}" for c in conv)
+              + f" {q['evaluate']:>9.3f} {q['slices']:>9.3f} {q['polygons']:>9.3f} {sum(q.values()):>9.3f}", flush=True)
 
 
 if __name__ == "__main__":

@@ -60,7 +60,7 @@ ripples and the check finds the fixed point."""
 
 # Nodes this close to a blocked place's edge (in cells) still count as free:
 # the edge is walkable, and float32 rounding must not move it inside.
-_EDGE_SLACK = 1e-3
+EDGE_SLACK = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
@@ -98,7 +98,7 @@ class Arena:
     @property
     def free(self) -> np.ndarray:
         """Nodes either player may stand on."""
-        return self.blocked > -_EDGE_SLACK * min(self.grid.spacing)
+        return self.blocked > -EDGE_SLACK * min(self.grid.spacing)
 
     def joint_grid(self) -> Grid:
         """The 4-D grid of ``(x_a, y_a, x_d, y_d)``."""
@@ -259,7 +259,7 @@ def _pursuit(arena: Arena, rules: Rules) -> SimpleMotion:
 
 
 def _shift(arena: Arena) -> float:
-    return _EDGE_SLACK * min(arena.grid.spacing)
+    return EDGE_SLACK * min(arena.grid.spacing)
 
 
 def _attacker_part(a: np.ndarray, dtype) -> np.ndarray:

@@ -27,7 +27,7 @@ import numba
 import numpy as np
 import shapely
 
-from solvers.ctf import CtfSolution, SetSolution
+from solvers.ctf import EDGE_SLACK, CtfSolution, SetSolution
 from solvers.errors import InputError
 
 __all__ = ["Guidance", "StateReport", "PHASES"]
@@ -99,7 +99,7 @@ class Guidance:
     def blocked_at(self, point) -> bool:
         g = self.arena.grid
         distance = interpolate_2d(self.arena.blocked, np.asarray(g.lo), np.asarray(g.spacing), np.asarray(point, float))
-        return distance < -1e-3 * min(g.spacing)
+        return distance < -EDGE_SLACK * min(g.spacing)
 
     def evaluate(self, attacker, defender, phase: str = "capture") -> StateReport:
         """Value and optimal headings at the state."""

@@ -121,10 +121,15 @@ def game_from_args(args) -> CtfGame:
 
 
 def solve_game(args) -> tuple[CtfGame, Solved, float]:
-    """Load or solve the game the options name, with a progress bar on stderr for sets being solved."""
+    """Load or solve the game the options name, with a progress bar on stderr
+    for sets being solved. Positions given on the command line are checked
+    against the map first, so a typo costs no solve."""
     from tqdm import tqdm
 
     game = game_from_args(args)
+    for who in ("attacker", "defender"):
+        if getattr(args, who, None) is not None:
+            game.map.check_position(getattr(args, who), who)
     bars: dict[str, tqdm] = {}
 
     def progress(name: str, t: float, horizon: float, change: float) -> None:
