@@ -129,7 +129,14 @@ class Rules:
 @dataclass(frozen=True, eq=False)
 class SetSolution:
     """One winning set: ``value <= 0`` is the attacker's, ``value > 0`` the
-    defender's; plus how its solve went."""
+    defender's; plus how its solve went.
+
+    ``time_to_win`` (T*, thesis end of 3.4) is the horizon at which each
+    state joined the set: the time the attacker needs to win from it under
+    optimal play (0 where it has already won, inf outside the set). Inside
+    the set the value is flat wherever every strategy reaches the target's
+    deepest point, so headings there come from the gradient of T*, whose
+    level sets are the fronts the value's zero level passed through."""
 
     name: str
     value: np.ndarray
@@ -137,6 +144,7 @@ class SetSolution:
     converged_at: float | None
     time: float
     steps: int
+    time_to_win: np.ndarray | None = None
 
     @property
     def attacker_wins(self) -> np.ndarray:
@@ -144,7 +152,7 @@ class SetSolution:
 
     @classmethod
     def from_result(cls, name: str, result: ReachAvoidResult) -> "SetSolution":
-        return cls(name, result.value, result.converged, result.converged_at, result.time, result.steps)
+        return cls(name, result.value, result.converged, result.converged_at, result.time, result.steps, result.tstar)
 
 
 @dataclass(frozen=True, eq=False)
@@ -174,12 +182,14 @@ ProgressCallback = Callable[[str, float, float, float], None]
 
 
 def required_game_bytes(arena: Arena, stages: str = "both", *, scheme: str = "weno5", dtype=np.float32) -> int:
-    """Peak bytes of ``solve_ctf``: the solver's own arrays plus the target
-    and avoid functions it is handed and the values already solved."""
+    """Peak bytes of ``solve_ctf``: the solver's own arrays (with T*) plus
+    the target and avoid functions it is handed and the values and T* of
+    the sets already solved."""
     grid = arena.joint_grid()
     itemsize = np.dtype(dtype).itemsize
     kept = len(_stage_list(stages)) - 1
-    return required_bytes(grid, scheme=scheme, dtype=dtype) + (2 + kept) * grid.size * itemsize
+    solver = required_bytes(grid, scheme=scheme, dtype=dtype, record_tstar=True, record_gradient=False)
+    return solver + (2 + 2 * kept) * grid.size * itemsize
 
 
 def solve_ctf(
@@ -190,14 +200,14 @@ def solve_ctf(
     scheme: str = "weno5",
     dtype=np.float32,
     tol: float = DEFAULT_TOL,
-    known: dict[str, np.ndarray] | None = None,
+    known: dict[str, SetSolution] | None = None,
     progress: ProgressCallback | None = None,
     memory_limit: int | None = None,
 ) -> CtfSolution:
     """Solve the sets of ``stages`` (see ``STAGES``). A set counts as
     converged (thesis 3.3.2) once its value changes by less than ``tol``
     cells while the faster player crosses two cells; ``known`` supplies
-    values already solved (e.g. R_A from a cache), keyed like
+    sets already solved (e.g. R_A from a cache), keyed like
     ``CtfSolution.sets``."""
     names = _stage_list(stages)
     known = dict(known or {})
@@ -217,7 +227,7 @@ def solve_ctf(
     sets: dict[str, SetSolution] = {}
     for name in names:
         if name in known:
-            sets[name] = SetSolution(name, np.asarray(known[name], dtype), True, None, 0.0, 0)
+            sets[name] = known[name]
             continue
         if avoid is None:
             avoid = _avoid(arena, rules, dtype)
@@ -227,7 +237,7 @@ def solve_ctf(
         result = solve_reach_avoid(
             grid, game, target, avoid, horizon=horizon, scheme=scheme, dtype=dtype,
             tol=tol * min(arena.grid.spacing), check_every=_check_window(arena, rules),
-            progress=report, memory_limit=limit,
+            record_tstar=True, record_gradient=False, progress=report, memory_limit=limit,
         )  # fmt: skip
         del target
         sets[name] = SetSolution.from_result(name, result)

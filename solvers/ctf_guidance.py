@@ -112,8 +112,16 @@ class Guidance:
         return self._report(self.solution.sets[name], attacker, defender)
 
     def _report(self, found: SetSolution, attacker, defender) -> StateReport:
+        """Headings by eqs. 3.12-3.13: down the value's gradient for the
+        attacker, up it for the defender; inside the set, where the value
+        may be flat, the same on the time-to-win T* (the attacker hurries,
+        the defender delays), as the end of thesis 3.4 prescribes."""
         state = self.check_state(attacker, defender)
         value, gradient = _value_and_gradient(found.value, self._lo, self._spacing, state)
+        if value <= 0 and found.time_to_win is not None:
+            towards = _finite_gradient(found.time_to_win, self._lo, self._spacing, state)
+            if np.any(towards != 0):
+                gradient = towards
         return StateReport(float(value), _unit(-gradient[:2]), _unit(gradient[2:]))
 
     def defender_region_values(self, attacker, phase: str = "capture") -> np.ndarray:
@@ -152,7 +160,13 @@ class Guidance:
             rings = [outline[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b - a >= 4]
             if rings:
                 shapes.append(shapely.Polygon(rings[0], rings[1:]))
-        return shapely.MultiPolygon(shapes) if shapes else shapely.MultiPolygon()
+        # Nodes exactly at zero (on a region's edge, where a signed distance
+        # vanishes) leave degenerate holes and pieces that touch along an
+        # edge; repair them into a valid shape of the same area.
+        region = shapely.make_valid(shapely.MultiPolygon(shapes)) if shapes else shapely.MultiPolygon()
+        parts = shapely.get_parts(region)
+        polygons = [p for part in parts for p in shapely.get_parts(part) if isinstance(p, shapely.Polygon) and p.area > 0]
+        return shapely.MultiPolygon(shapely.get_parts(shapely.union_all(polygons))) if polygons else shapely.MultiPolygon()
 
 
 def _unit(v: np.ndarray) -> tuple[float, float] | None:
@@ -211,6 +225,64 @@ def _value_and_gradient(v, lo, spacing, state):
         for k in range(4):
             gradient[k] += w * _node_derivative(v, idx, k, spacing, n)
     return value, gradient
+
+
+@numba.njit(cache=True)
+def _finite_derivative(v, idx, axis, spacing, n):
+    """Like ``_node_derivative`` but only through finite neighbours: T* is
+    infinite outside the set, so at its edge the difference is one-sided."""
+    centre = v[idx[0], idx[1], idx[2], idx[3]]
+    if not np.isfinite(centre):
+        return np.nan
+    lo_idx = idx.copy()
+    hi_idx = idx.copy()
+    lo_idx[axis] = max(idx[axis] - 1, 0)
+    hi_idx[axis] = min(idx[axis] + 1, n[axis] - 1)
+    below = v[lo_idx[0], lo_idx[1], lo_idx[2], lo_idx[3]]
+    above = v[hi_idx[0], hi_idx[1], hi_idx[2], hi_idx[3]]
+    if not np.isfinite(below) or lo_idx[axis] == idx[axis]:
+        below, lo_idx[axis] = centre, idx[axis]
+    if not np.isfinite(above) or hi_idx[axis] == idx[axis]:
+        above, hi_idx[axis] = centre, idx[axis]
+    span = hi_idx[axis] - lo_idx[axis]
+    return (above - below) / (span * spacing[axis]) if span > 0 else 0.0
+
+
+@numba.njit(cache=True)
+def _finite_gradient(v, lo, spacing, state):
+    """The gradient of ``v`` at ``state`` interpolated from the finite
+    corners of its cell only (weights renormalised); zero if none is."""
+    n = np.array(v.shape)
+    base = np.empty(4, np.int64)
+    frac = np.empty(4)
+    for k in range(4):
+        f = min(max((state[k] - lo[k]) / spacing[k], 0.0), n[k] - 1.0)
+        base[k] = min(int(f), n[k] - 2)
+        frac[k] = f - base[k]
+    gradient = np.zeros(4)
+    total = 0.0
+    idx = np.empty(4, np.int64)
+    d = np.empty(4)
+    for corner in range(16):
+        w = 1.0
+        for k in range(4):
+            bit = (corner >> k) & 1
+            idx[k] = base[k] + bit
+            w *= frac[k] if bit else 1.0 - frac[k]
+        if w == 0.0:
+            continue
+        finite = True
+        for k in range(4):
+            d[k] = _finite_derivative(v, idx, k, spacing, n)
+            if not np.isfinite(d[k]):
+                finite = False
+        if finite:
+            total += w
+            for k in range(4):
+                gradient[k] += w * d[k]
+    if total > 0.0:
+        gradient /= total
+    return gradient
 
 
 @numba.njit(cache=True)

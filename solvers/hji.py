@@ -100,7 +100,10 @@ class ReachAvoidResult:
     the initial set, inf if never) and ``tstar_gradient`` (shape
     ``grid.shape + (ndim,)``) the central gradient of ``J`` at that moment,
     from which eqs. 3.12-3.13 give the controls where the interior value is
-    unreliable (end of thesis 3.4)."""
+    unreliable (end of thesis 3.4); ``record_gradient=False`` leaves it out
+    (None) to save ``ndim`` arrays, for callers that take the direction from
+    the gradient of ``tstar`` itself, the time-to-reach whose level sets are
+    the fronts (eq. 3.6)."""
 
     value: np.ndarray
     converged: bool
@@ -116,7 +119,8 @@ class ReachAvoidResult:
 
 
 def required_bytes(
-    grid: Grid, *, scheme: str = "weno5", dtype=np.float32, has_avoid: bool = True, record_tstar: bool = False
+    grid: Grid, *, scheme: str = "weno5", dtype=np.float32, has_avoid: bool = True, record_tstar: bool = False,
+    record_gradient: bool = True,
 ) -> int:
     """Bytes of the arrays a solve allocates: the time-stepping buffers, the
     convergence snapshot and its copies of ``target`` and ``avoid`` (all
@@ -125,7 +129,7 @@ def required_bytes(
     na, nb = grid.shape[-2:]
     padded = grid.size // (na * nb) * (na + 6) * (nb + 6)
     n_padded = _scheme(scheme).buffers + 2 + int(has_avoid)
-    n_plain = (1 + grid.ndim) if record_tstar else 0
+    n_plain = (1 + grid.ndim * int(record_gradient)) if record_tstar else 0
     return (n_padded * padded + n_plain * grid.size) * np.dtype(dtype).itemsize
 
 
@@ -147,6 +151,7 @@ def solve_reach_avoid(
     tol: float = 1e-2,
     check_every: float = 0.5,
     record_tstar: bool = False,
+    record_gradient: bool = True,
     monotone: bool = True,
     progress: Callable[[float, float], None] | None = None,
     memory_limit: int | None = None,
@@ -186,7 +191,8 @@ def solve_reach_avoid(
     target = _grid_array("target", target, grid)
     avoid = None if avoid is None else _grid_array("avoid", avoid, grid)
     limit = available_bytes() if memory_limit is None else int(memory_limit)
-    need = required_bytes(grid, scheme=scheme, dtype=dtype, has_avoid=avoid is not None, record_tstar=record_tstar)
+    need = required_bytes(grid, scheme=scheme, dtype=dtype, has_avoid=avoid is not None, record_tstar=record_tstar,
+                          record_gradient=record_gradient)  # fmt: skip
     if need > limit:
         dims = "x".join(str(n) for n in grid.shape)
         raise InputError(
@@ -214,7 +220,8 @@ def solve_reach_avoid(
     snapshot = u.copy()
     del u
     tstar = np.full(grid.size, np.inf, dtype) if record_tstar else np.zeros(0, dtype)
-    tgrad = np.zeros(grid.size * grid.ndim, dtype) if record_tstar else np.zeros(0, dtype)
+    with_gradient = record_tstar and record_gradient
+    tgrad = np.zeros(grid.size * grid.ndim, dtype) if with_gradient else np.zeros(0, dtype)
     stepper = _Stepper(grid, sch, dtype, target, avoid, ham.args, record_tstar, tstar, tgrad, monotone)
 
     t, steps, converged_at = 0.0, 0, None
@@ -243,7 +250,7 @@ def solve_reach_avoid(
         time=t,
         steps=steps,
         tstar=tstar.reshape(grid.shape) if record_tstar else None,
-        tstar_gradient=tgrad.reshape(grid.shape + (grid.ndim,)) if record_tstar else None,
+        tstar_gradient=tgrad.reshape(grid.shape + (grid.ndim,)) if with_gradient else None,
     )
 
 

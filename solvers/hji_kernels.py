@@ -392,6 +392,8 @@ def _record(o_run, u_run, pl, pr, na, nb, offset, t_old, dt, tstar, tgrad):
                 before = u_run[j]
                 frac = before / (before - after) if before > 0 else 0.0
                 tstar[node] = t_old + frac * dt
+                if tgrad.shape[0] == 0:
+                    continue
                 for k in range(ndim):
                     tgrad[node * ndim + k] = 0.5 * (pl[k, j] + pr[k, j])
 

@@ -1,8 +1,9 @@
 """Solved capture-the-flag sets on disk, so the ground station and the CLI
 solve a game once and load it in milliseconds afterwards.
 
-Each set (R_A, F_A, W_A) is one ``.npy`` file, memory-mapped on load, with a
-``.json`` beside it saying how its solve went. Its key hashes everything
+Each set (R_A, F_A, W_A) is two ``.npy`` files, its value and its
+time-to-win, memory-mapped on load, with a ``.json`` beside them saying how
+its solve went. Its key hashes everything
 that decides its values: the map's full GeoJSON, the grid, the speeds,
 capture radius and horizon that set depends on, the scheme, tolerance and
 precision, the file format and the package version; W_A's key includes R_A's.
@@ -105,17 +106,14 @@ def load_or_solve(
                 sources[name] = "cache"
     solution = solve_ctf(
         arena, game.rules, stages, scheme=game.scheme, dtype=np.dtype(game.dtype), tol=game.tol,
-        known={name: s.value for name, s in known.items()}, progress=progress,
+        known=known, progress=progress,
     )  # fmt: skip
-    sets = dict(solution.sets)
     for name, solved in solution.sets.items():
-        if name in known:
-            sets[name] = known[name]
-            continue
-        sources[name] = "solved"
-        if use_cache:
-            _store(paths[name], solved)
-    return Solved(CtfSolution(arena, game.rules, sets), sources, paths)
+        if name not in known:
+            sources[name] = "solved"
+            if use_cache:
+                _store(paths[name], solved)
+    return Solved(solution, sources, paths)
 
 
 def _version() -> str:
@@ -132,20 +130,27 @@ def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
     try:
         meta = json.loads(meta_path.read_text())
         value = np.load(path, mmap_mode="r")
-        if value.shape != shape:
-            raise ValueError(f"shape {value.shape}, expected {shape}")
+        time_to_win = np.load(_tstar_path(path), mmap_mode="r")
+        for array in (value, time_to_win):
+            if array.shape != shape:
+                raise ValueError(f"shape {array.shape}, expected {shape}")
         return SetSolution(
-            meta["name"], value, bool(meta["converged"]), meta["converged_at"], float(meta["time"]), int(meta["steps"])
-        )
-    except (OSError, ValueError, KeyError, TypeError) as exc:
+            meta["name"], value, bool(meta["converged"]), meta["converged_at"], float(meta["time"]),
+            int(meta["steps"]), time_to_win,
+        )  # fmt: skip
+    except (OSError, EOFError, ValueError, KeyError, TypeError) as exc:
         log.warning("cached set %s is unreadable (%s); solving it again", path, exc)
         return None
 
 
+def _tstar_path(path: Path) -> Path:
+    return path.with_name(path.stem + ".tstar.npy")
+
+
 def _store(path: Path, solved: SetSolution) -> None:
-    """Write value then metadata, each through a temporary file renamed into
-    place, so a reader never sees half a file and an entry without its
-    metadata counts as missing."""
+    """Write value, time-to-win, then metadata, each through a temporary
+    file renamed into place, so a reader never sees half a file and an entry
+    without its metadata counts as missing."""
     path.parent.mkdir(parents=True, exist_ok=True)
     meta = {
         "name": solved.name,
@@ -156,6 +161,7 @@ def _store(path: Path, solved: SetSolution) -> None:
     }
     for target, write in (
         (path, lambda f: np.save(f, np.asarray(solved.value))),
+        (_tstar_path(path), lambda f: np.save(f, np.asarray(solved.time_to_win))),
         (path.with_suffix(".json"), lambda f: f.write(json.dumps(meta).encode())),
     ):
         handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".partial-")
