@@ -39,7 +39,7 @@ import numpy as np
 from solvers.errors import InputError
 from solvers.grid import Grid
 from solvers.hamiltonians import Player, SimpleMotion
-from solvers.hji import ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
+from solvers.hji import PaddedField, ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
 
 __all__ = ["Arena", "CtfSolution", "Rules", "SetSolution", "STAGES", "required_game_bytes", "solve_ctf"]
 
@@ -182,14 +182,14 @@ ProgressCallback = Callable[[str, float, float, float], None]
 
 
 def required_game_bytes(arena: Arena, stages: str = "both", *, scheme: str = "weno5", dtype=np.float32) -> int:
-    """Peak bytes of ``solve_ctf``: the solver's own arrays (with T*) plus
-    the target and avoid functions it is handed and the values and T* of
-    the sets already solved."""
+    """Peak bytes of ``solve_ctf``: the solver's own arrays (with T*, and
+    the target and avoid, built in place) plus the values and T* of the sets
+    already solved."""
     grid = arena.joint_grid()
     itemsize = np.dtype(dtype).itemsize
     kept = len(_stage_list(stages)) - 1
     solver = required_bytes(grid, scheme=scheme, dtype=dtype, record_tstar=True, record_gradient=False)
-    return solver + (2 + 2 * kept) * grid.size * itemsize
+    return solver + 2 * kept * grid.size * itemsize
 
 
 def solve_ctf(
@@ -280,14 +280,15 @@ def _defender_part(b: np.ndarray, dtype) -> np.ndarray:
     return np.asarray(b, dtype)[None, None, :, :]
 
 
-def _avoid(arena: Arena, rules: Rules, dtype) -> np.ndarray:
+def _avoid(arena: Arena, rules: Rules, dtype) -> PaddedField:
     """``C_J = C u G_A``: captured, or the attacker blocked."""
+    avoid = PaddedField(arena.joint_grid(), dtype)
     xs, ys = (np.asarray(v, dtype) for v in arena.grid.axes())
     dx = xs[:, None, None, None] - xs[None, None, :, None]
     dy = ys[None, :, None, None] - ys[None, None, None, :]
-    avoid = np.hypot(dx, dy)
-    avoid -= dtype.type(rules.capture_radius)
-    np.minimum(avoid, _attacker_part(arena.blocked + _shift(arena), dtype), out=avoid)
+    np.hypot(dx, dy, out=avoid.nodes)
+    avoid.nodes -= dtype.type(rules.capture_radius)
+    np.minimum(avoid.nodes, _attacker_part(arena.blocked + _shift(arena), dtype), out=avoid.nodes)
     return avoid
 
 
@@ -296,13 +297,16 @@ def _defender_forfeits(arena: Arena) -> np.ndarray:
     return np.minimum(np.minimum(arena.flag, arena.home), arena.blocked + _shift(arena))
 
 
-def _target(name: str, arena: Arena, forfeit: np.ndarray, sets: dict[str, SetSolution], dtype) -> np.ndarray:
+def _target(name: str, arena: Arena, forfeit: np.ndarray, sets: dict[str, SetSolution], dtype) -> PaddedField:
     """The attacker's target of one set, ``G_x u G_D``."""
+    target = PaddedField(arena.joint_grid(), dtype)
+    defender_forfeits = _defender_part(forfeit, dtype)
     if name == "return":
-        return np.minimum(_attacker_part(arena.home, dtype), _defender_part(forfeit, dtype))
-    if name == "capture":
-        return np.minimum(_attacker_part(arena.flag, dtype), _defender_part(forfeit, dtype))
-    # W_A: the flag reached inside R_A, i.e. max(l_F, J_RA); or a forfeit.
-    target = np.maximum(_attacker_part(arena.flag, dtype), sets["return"].value)
-    np.minimum(target, _defender_part(forfeit, dtype), out=target)
+        np.minimum(_attacker_part(arena.home, dtype), defender_forfeits, out=target.nodes)
+    elif name == "capture":
+        np.minimum(_attacker_part(arena.flag, dtype), defender_forfeits, out=target.nodes)
+    else:
+        # W_A: the flag reached inside R_A, i.e. max(l_F, J_RA); or a forfeit.
+        np.maximum(_attacker_part(arena.flag, dtype), sets["return"].value, out=target.nodes)
+        np.minimum(target.nodes, defender_forfeits, out=target.nodes)
     return target

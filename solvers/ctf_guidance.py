@@ -189,6 +189,29 @@ def interpolate_2d(a, lo, spacing, point):
 
 
 @numba.njit(cache=True)
+def _cell(n, lo, spacing, state):
+    """The cell holding ``state`` (its lowest node) and the position within it, clamped to the grid."""
+    base = np.empty(4, np.int64)
+    frac = np.empty(4)
+    for k in range(4):
+        f = min(max((state[k] - lo[k]) / spacing[k], 0.0), n[k] - 1.0)
+        base[k] = min(int(f), n[k] - 2)
+        frac[k] = f - base[k]
+    return base, frac
+
+
+@numba.njit(cache=True)
+def _corner(corner, base, frac, idx):
+    """Set ``idx`` to corner number ``corner`` (one bit per axis) of the cell; its multilinear weight."""
+    w = 1.0
+    for k in range(4):
+        bit = (corner >> k) & 1
+        idx[k] = base[k] + bit
+        w *= frac[k] if bit else 1.0 - frac[k]
+    return w
+
+
+@numba.njit(cache=True)
 def _node_derivative(v, idx, axis, spacing, n):
     """Central difference of ``v`` along ``axis`` at node ``idx``, one-sided on the edges."""
     lo_idx = idx.copy()
@@ -204,21 +227,12 @@ def _node_derivative(v, idx, axis, spacing, n):
 @numba.njit(cache=True)
 def _value_and_gradient(v, lo, spacing, state):
     n = np.array(v.shape)
-    base = np.empty(4, np.int64)
-    frac = np.empty(4)
-    for k in range(4):
-        f = min(max((state[k] - lo[k]) / spacing[k], 0.0), n[k] - 1.0)
-        base[k] = min(int(f), n[k] - 2)
-        frac[k] = f - base[k]
+    base, frac = _cell(n, lo, spacing, state)
     value = 0.0
     gradient = np.zeros(4)
     idx = np.empty(4, np.int64)
     for corner in range(16):
-        w = 1.0
-        for k in range(4):
-            bit = (corner >> k) & 1
-            idx[k] = base[k] + bit
-            w *= frac[k] if bit else 1.0 - frac[k]
+        w = _corner(corner, base, frac, idx)
         if w == 0.0:
             continue
         value += w * v[idx[0], idx[1], idx[2], idx[3]]
@@ -253,22 +267,13 @@ def _finite_gradient(v, lo, spacing, state):
     """The gradient of ``v`` at ``state`` interpolated from the finite
     corners of its cell only (weights renormalised); zero if none is."""
     n = np.array(v.shape)
-    base = np.empty(4, np.int64)
-    frac = np.empty(4)
-    for k in range(4):
-        f = min(max((state[k] - lo[k]) / spacing[k], 0.0), n[k] - 1.0)
-        base[k] = min(int(f), n[k] - 2)
-        frac[k] = f - base[k]
+    base, frac = _cell(n, lo, spacing, state)
     gradient = np.zeros(4)
     total = 0.0
     idx = np.empty(4, np.int64)
     d = np.empty(4)
     for corner in range(16):
-        w = 1.0
-        for k in range(4):
-            bit = (corner >> k) & 1
-            idx[k] = base[k] + bit
-            w *= frac[k] if bit else 1.0 - frac[k]
+        w = _corner(corner, base, frac, idx)
         if w == 0.0:
             continue
         finite = True

@@ -12,7 +12,7 @@ from scipy import ndimage
 from solvers.errors import InputError
 from solvers.grid import Grid
 from solvers.hamiltonians import Box, Ball, ControlAffine, Player, SimpleMotion
-from solvers.hji import required_bytes, solve_reach_avoid
+from solvers.hji import PaddedField, required_bytes, solve_reach_avoid
 
 SCHEMES = ("first", "weno5")
 # Half-width, in cells, of the band around a set boundary where the schemes
@@ -382,3 +382,21 @@ def test_bad_inputs_name_the_culprit():
         solve_reach_avoid(g, SimpleMotion((Player((0, 1), 1.0), Player((1,), 1.0))), x, horizon=1.0)
     with pytest.raises(InputError, match="horizon"):
         solve_reach_avoid(g, runner(), x, horizon=-1.0)
+
+
+def test_padded_fields_solve_exactly_like_plain_arrays_and_tstar_can_skip_the_gradient():
+    g = Grid.spanning((-5.0,) * 4, (5.0,) * 4, (9,) * 4)
+    xa, ya, xd, yd = g.mesh()
+    target, avoid = np.minimum(4.0 - xa, 4.0 - xd), np.hypot(xa - xd, ya - yd) - 1.5
+    plain = solve_reach_avoid(g, SimpleMotion.pursuit(1.0, 1.0), target, avoid, horizon=3.0, record_tstar=True)
+    fields = []
+    for array in (target, avoid):
+        field = PaddedField(g)
+        field.nodes[...] = array
+        fields.append(field)
+    padded = solve_reach_avoid(g, SimpleMotion.pursuit(1.0, 1.0), *fields, horizon=3.0, record_tstar=True,
+                               record_gradient=False)  # fmt: skip
+    assert np.array_equal(plain.value, padded.value) and np.array_equal(plain.tstar, padded.tstar)
+    assert padded.tstar_gradient is None and plain.tstar_gradient is not None
+    with pytest.raises(InputError, match="PaddedField"):
+        solve_reach_avoid(g, SimpleMotion.pursuit(1.0, 1.0), PaddedField(g, np.float64), horizon=1.0)
