@@ -4,6 +4,7 @@ problem, scheme, grid, CFL number, boundary rule and horizon.
     python benchmarks/hji.py            # 45^4 over 6 time units, then ours to convergence and at 65^4,
                                         # then the two-stage game at 45^4 and 65^4 with query timings
     python benchmarks/hji.py --quick    # 21^4 over 2 time units, a few seconds per run
+    python benchmarks/hji.py --game     # only the two-stage game at 45^4 and 65^4
 
 Needs ``pip install jax hj-reachability`` (JAX on the CPU). Every solve runs in
 its own process so that its peak resident memory can be read from
@@ -207,6 +208,7 @@ def row(label: str, n: int, r: dict, ratio: str = "", disagree: str = "") -> str
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="21^4 over 2 time units")
+    parser.add_argument("--game", action="store_true", help="only the two-stage capture-the-flag game")
     parser.add_argument("--child", choices=("ours", "hj", "game"), dest="solver", help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, default=45, help=argparse.SUPPRESS)
     parser.add_argument("--scheme", default="weno5", help=argparse.SUPPRESS)
@@ -218,7 +220,15 @@ def main() -> None:
         child(args)
         return
 
-    n, horizon = (21, 2.0) if args.quick else (45, 6.0)
+    if not args.game:
+        compare(args.quick)
+        print()
+    game(args.quick)
+
+
+def compare(quick: bool) -> None:
+    """Ours against hj_reachability on one problem, then ours to convergence and at 65^4."""
+    n, horizon = (21, 2.0) if quick else (45, 6.0)
     print(f"flag-return set on [-5,5]^2 per agent, return strip x >= {STRIP}, r_c = {CAPTURE_RADIUS}, "
           f"equal speeds, CFL 0.75, float32, {os.cpu_count()} cores")  # fmt: skip
     print(f"{'solver':<24} {'grid':>5} {'horizon':>6} {'conv':>6} {'steps':>5} {'seconds':>8} "
@@ -235,16 +245,19 @@ def main() -> None:
         for scheme in ("first", "weno5"):
             conv = measure("ours", n, scheme, 30.0, 0.01, os.path.join(tmp, "conv.npy"))
             print(row(f"bearcat {scheme}, to tol .01", n, conv), flush=True)
-        if not args.quick:
+        if not quick:
             big = measure("ours", 65, "weno5", 1.0, 0.0, os.path.join(tmp, "big.npy"))
             print(row("bearcat weno5 (memory)", 65, big), flush=True)
     print("ns/n/st: nanoseconds per grid node per time step; disagree: fraction of nodes whose membership differs")
-    print()
+
+
+def game(quick: bool) -> None:
+    """The two-stage game at 45^4 and 65^4 (21^4 when quick): time, peak memory, queries."""
     print(f"two-stage capture-the-flag on {GAME_MAP} (R_A then W_A), WENO5 to convergence, speeds {GAME_SPEED} m/s, "
           f"r_c {GAME_CAPTURE_RADIUS} m, horizons {GAME_HORIZON} s; guidance query medians over 190 random states")
     print(f"{'grid':>6} {'seconds':>8} {'peak MB':>8} {'R_A conv s':>10} {'W_A conv s':>10} "
           f"{'value ms':>9} {'slices ms':>9} {'polys ms':>9} {'total ms':>9}")  # fmt: skip
-    for n_game in (21,) if args.quick else (45, 65):
+    for n_game in (21,) if quick else (45, 65):
         with tempfile.TemporaryDirectory() as tmp:
             r = measure("game", n_game, "weno5", 0.0, 0.0, os.path.join(tmp, "unused.npy"))
         conv = [r["sets"][k]["converged_at"] for k in ("return", "win")]
