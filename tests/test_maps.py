@@ -180,6 +180,7 @@ def test_built_in_free_space_is_connected(built_in):
 
 
 EXPECTED_REGIONS = {
+    "ctf-10": {"home": "return", "flag": "flag"},
     "field-50": {"home": "return", "flag": "flag"},
     "campus-200": {"flag": "flag", "home": "return"},
     "campus-400": {"flag": "flag", "home": "return"},

@@ -33,7 +33,7 @@ from solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rule
 log = logging.getLogger(__name__)
 
 CACHE_ENV = "BEARCAT_CACHE_DIR"
-FORMAT = 1
+FORMAT = 2
 
 
 def cache_root() -> Path:

@@ -184,7 +184,8 @@ def run_solve(args) -> int:
         elif row["converged"]:
             how = f"converged at {row['converged_at_s']:.1f} s of game time, {row['steps']} steps"
         else:
-            how = f"NOT converged within {row['horizon_s']:g} s ({row['steps']} steps); raise the horizon"
+            how = (f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
+                   f"{row['horizon_s']:g} s game; longer stage times approach the unlimited one")
         print(f"{row['set']}: attacker wins from {100 * row['attacker_wins_fraction']:.1f}% of free joint states; {how}")
     print(f"{seconds:.2f} s wall; cache {cache_root()}")
     if args.json is not None:
