@@ -400,3 +400,14 @@ def test_padded_fields_solve_exactly_like_plain_arrays_and_tstar_can_skip_the_gr
     assert padded.tstar_gradient is None and plain.tstar_gradient is not None
     with pytest.raises(InputError, match="PaddedField"):
         solve_reach_avoid(g, SimpleMotion.pursuit(1.0, 1.0), PaddedField(g, np.float64), horizon=1.0)
+
+
+def test_a_five_dimensional_grid_grows_a_ball_at_the_runners_speed_whatever_the_other_player_does():
+    """A 3-D runner (axes 0-2) and an irrelevant 2-D disturbance (axes 3-4):
+    the set after time t is the ball of radius 1.5 + t, on every 2-D slice."""
+    g = Grid.spanning((-5.0,) * 5, (5.0,) * 5, (11,) * 5)
+    x = g.mesh()
+    radius = np.sqrt(x[0] ** 2 + x[1] ** 2 + x[2] ** 2)
+    game = SimpleMotion((Player((0, 1, 2), 1.0, "control"), Player((3, 4), 0.5, "disturbance")))
+    found = solve_reach_avoid(g, game, radius - 1.5, horizon=2.0).reach_avoid_set
+    assert_matches(found, radius <= 3.5, 1.0)
