@@ -1,0 +1,133 @@
+"""Run many independent trials, resumably, on a local process pool or a Dask
+cluster.
+
+Each task is a JSON-ready dict with a unique ``"key"``; each result is a
+JSON-ready dict that carries the same key and is appended to a JSON-lines
+file the moment it arrives. A run that is interrupted (Ctrl-C, a killed
+worker, a lost cluster) keeps every line already written, and the same call
+again skips the keys it finds there, so finished trials are never redone.
+Tasks carry their own seeds, so a trial's result does not depend on which
+worker ran it or in what order.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures.process import BrokenProcessPool
+from pathlib import Path
+from typing import Callable, Iterable
+
+log = logging.getLogger(__name__)
+
+__all__ = ["BatchInterrupted", "read_results", "run_batch"]
+
+
+class BatchInterrupted(RuntimeError):
+    """The batch stopped early; the results so far are on disk."""
+
+
+def read_results(path: Path) -> dict[str, dict]:
+    """The results already in ``path`` by key. A last line cut short by a
+    crash is ignored (and will be redone), as is any line that is not a
+    result object."""
+    results: dict[str, dict] = {}
+    if not path.exists():
+        return results
+    with path.open(encoding="utf-8") as f:
+        for number, line in enumerate(f, start=1):
+            try:
+                result = json.loads(line)
+                results[result["key"]] = result
+            except (json.JSONDecodeError, KeyError, TypeError):
+                log.warning("%s line %d is not a complete result; its trial will be run again", path, number)
+    return results
+
+
+def run_batch(
+    tasks: Iterable[dict],
+    work: Callable[[dict], dict],
+    out: Path,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    on_result: Callable[[dict], None] | None = None,
+) -> dict[str, dict]:
+    """Run ``work(task)`` for every task whose key is not yet in ``out`` and
+    return all results by key, old and new. ``workers`` bounds the local
+    process pool (default: the CPU count); ``scheduler`` (``tcp://host:port``)
+    sends the tasks to a Dask cluster instead, whose workers must be able to
+    import ``work``. ``on_result`` is called once per finished task, old ones
+    included, for a progress display."""
+    tasks = list(tasks)
+    keys = [t["key"] for t in tasks]
+    if len(set(keys)) != len(keys):
+        raise ValueError("task keys must be unique")
+    out.parent.mkdir(parents=True, exist_ok=True)
+    results = read_results(out)
+    for key in keys:
+        if key in results and on_result is not None:
+            on_result(results[key])
+    todo = [t for t in tasks if t["key"] not in results]
+    if not todo:
+        return results
+    with out.open("a", encoding="utf-8") as sink:
+
+        def record(result: dict) -> None:
+            sink.write(json.dumps(result, separators=(",", ":")) + "\n")
+            sink.flush()
+            os.fsync(sink.fileno())
+            results[result["key"]] = result
+            if on_result is not None:
+                on_result(result)
+
+        if scheduler is None:
+            _run_local(todo, work, workers, record, out)
+        else:
+            _run_dask(todo, work, scheduler, record, out)
+    return results
+
+
+def _run_local(todo, work, workers, record, out) -> None:
+    with ProcessPoolExecutor(max_workers=workers or os.cpu_count()) as pool:
+        futures = [pool.submit(work, task) for task in todo]
+        try:
+            for future in as_completed(futures):
+                record(future.result())
+        except BrokenProcessPool:
+            for future in futures:
+                future.cancel()
+            raise BatchInterrupted(
+                f"a worker process died; the finished trials are kept in {out}, run the same command again to resume"
+            ) from None
+        except BaseException:
+            for future in futures:
+                future.cancel()
+            raise
+
+
+def _run_dask(todo, work, scheduler, record, out) -> None:
+    try:
+        from distributed import Client, as_completed as dask_completed
+    except ImportError:
+        raise BatchInterrupted(
+            "a Dask scheduler was given but the 'distributed' package is not installed; pip install 'bearcat[cluster]'"
+        ) from None
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError) as exc:
+        raise BatchInterrupted(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
+    with client:
+        futures = client.map(work, todo, pure=False)
+        try:
+            for future in dask_completed(futures):
+                record(future.result())
+        except (OSError, TimeoutError) as exc:
+            raise BatchInterrupted(
+                f"the Dask cluster at {scheduler} failed ({exc}); the finished trials are kept in {out}, "
+                "run the same command again to resume"
+            ) from None
+        finally:
+            client.cancel(futures)
