@@ -147,3 +147,29 @@ def ctf_play_figure(game_map: Map, guidance, outcome, start):
     right.set_title(f"{outcome.winner} won: {outcome.reason} at {outcome.duration:.1f} s")
     fig.suptitle(f"capture-the-flag on {game_map.name}: both players on the optimal strategies")
     return fig
+
+
+def pursuit_histograms(table: dict, domains, counts):
+    """Fig. 5.11: per domain, the capture-time difference area minus pure
+    pursuit of each trial (negative: area pursuit was faster), one colour
+    per pursuer count."""
+    fig, axes = plt.subplots(1, len(domains), figsize=(5.2 * len(domains), 4.4), squeeze=False, layout="constrained")
+    colours = ("tab:blue", "tab:orange", "tab:green", "tab:red", "tab:purple")
+    for ax, domain in zip(axes[0], domains):
+        rows = [(n, table.get(f"{domain}/{n}")) for n in counts]
+        values = [v for _, row in rows if row for v in row["differences"]]
+        if not values:
+            ax.set_title(f"{domain}: no captured pairs")
+            continue
+        bins = np.linspace(min(values), max(values), 31) if min(values) < max(values) else 10
+        for k, (n, row) in enumerate(rows):
+            if row and row["differences"]:
+                ax.hist(row["differences"], bins=bins, histtype="step", linewidth=1.8, color=colours[k % len(colours)],
+                        label=f"{n} pursuer{'s' if n > 1 else ''}: {row['area_faster_percent']:.1f}% faster")  # fmt: skip
+        ax.axvline(0.0, color="black", linewidth=0.8)
+        ax.set_xlabel("capture time, area minus pure pursuit")
+        ax.set_ylabel("trials")
+        ax.set_title(domain)
+        ax.legend(fontsize=8)
+    fig.suptitle("safe-reachable-area pursuit against pure pursuit (thesis Fig. 5.11)")
+    return fig

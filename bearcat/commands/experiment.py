@@ -1,0 +1,135 @@
+"""``bearcat experiment pursuit``: the comparison trials of thesis 5.3.2 as a
+resumable batch, written to a run directory:
+
+- ``trials.jsonl``: one line per trial, appended as trials finish;
+- ``setup.json``: the setup the trials were run with (a rerun into the same
+  directory must match it, so resumed results stay comparable);
+- ``table.json`` and ``table.md``: Table 5.1 beside the thesis's values, with
+  capture-time quartiles;
+- ``histograms.png``: capture-time differences as in Fig. 5.11.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+from dataclasses import asdict
+from pathlib import Path
+
+from bearcat import arguments
+from maps import list_maps
+from scenarios.batch import BatchInterrupted, run_batch
+from scenarios.pursuit_experiment import PursuitSetup, run_trial, summarise, trial_tasks
+
+DEFAULT_DOMAINS = ("square-10", "triangle-10", "maze-10")
+
+
+def register(subparsers) -> None:
+    experiment = subparsers.add_parser("experiment", help="run a batch of trials")
+    kinds = experiment.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
+    p = kinds.add_parser(
+        "pursuit",
+        help="safe-reachable-area pursuit against pure pursuit (thesis Table 5.1, Fig. 5.11)",
+        description="Runs both pursuit strategies from the same random initial conditions against the "
+        "farthest-point evader and tabulates how often area pursuit captures sooner. Resumes an interrupted "
+        "run in the same --out directory without redoing finished trials.",
+    )
+    p.add_argument("--domain", nargs="+", default=list(DEFAULT_DOMAINS), metavar="MAP",
+                   help="maps to play on (default: square-10 triangle-10 maze-10)")
+    p.add_argument("--pursuers", nargs="+", type=int, default=[1, 2, 3], metavar="N", help="pursuer counts (default 1 2 3)")
+    p.add_argument("--trials", type=int, default=500, metavar="K", help="trials per domain and pursuer count (default 500)")
+    p.add_argument("--seed", type=int, default=0, help="seed of the whole run (default 0)")
+    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the trials on this Dask cluster instead")
+    p.add_argument("--out", type=Path, default=Path("pursuit-experiment"), metavar="DIR",
+                   help="run directory (default ./pursuit-experiment)")
+    p.add_argument("--dt", type=arguments.positive, default=PursuitSetup.dt, help=f"time step (default {PursuitSetup.dt})")
+    p.add_argument("--max-time", type=arguments.positive, default=PursuitSetup.max_time,
+                   help=f"longest chase in time units (default {PursuitSetup.max_time:g})")
+    p.add_argument("--gradient", choices=("boundary", "finite"), default=PursuitSetup.gradient,
+                   help="area gradient in non-convex domains (default boundary)")
+    p.set_defaults(run=run_pursuit)
+
+
+def run_pursuit(args) -> int:
+    from tqdm import tqdm
+
+    unknown = [d for d in args.domain if d not in list_maps()]
+    if unknown:
+        raise arguments.UsageError(f"unknown domain {unknown[0]!r}; built-in maps are {', '.join(list_maps())}")
+    if args.trials < 1 or any(n < 1 for n in args.pursuers):
+        raise arguments.UsageError("--trials and every --pursuers count must be at least 1")
+    setup = PursuitSetup(dt=args.dt, max_time=args.max_time, gradient=args.gradient)
+    _check_setup(args.out, {"seed": args.seed, **asdict(setup)})
+    tasks = trial_tasks(args.domain, args.pursuers, args.trials, args.seed, setup)
+    with tqdm(total=len(tasks), desc="trials", unit="trial", file=sys.stderr) as bar:
+        try:
+            results = run_batch(tasks, run_trial, args.out / "trials.jsonl", workers=args.workers,
+                                scheduler=args.scheduler, on_result=lambda _: bar.update())  # fmt: skip
+        except BatchInterrupted as exc:
+            raise arguments.UsageError(str(exc)) from None
+    wanted = {t["key"] for t in tasks}
+    table = summarise([r for k, r in results.items() if k in wanted], args.domain, args.pursuers)
+    (args.out / "table.json").write_text(json.dumps(table, indent=2) + "\n")
+    markdown = table_markdown(table, args.domain, args.pursuers)
+    (args.out / "table.md").write_text(markdown + "\n")
+    print(markdown)
+    from bearcat.figures import pursuit_histograms
+
+    figure = pursuit_histograms(table, args.domain, args.pursuers)
+    figure.savefig(args.out / "histograms.png", dpi=110)
+    print(f"wrote {args.out / 'trials.jsonl'}, table.md, table.json and histograms.png in {args.out}")
+    return 0
+
+
+def _check_setup(out: Path, setup: dict) -> None:
+    """Refuse to mix trials of another setup into a run directory."""
+    path = out / "setup.json"
+    if path.exists():
+        recorded = json.loads(path.read_text())
+        if recorded != setup:
+            changed = ", ".join(f"{k} {recorded.get(k)!r} -> {v!r}" for k, v in setup.items() if recorded.get(k) != v)
+            raise arguments.UsageError(f"{out} holds trials of another setup ({changed}); choose another --out")
+        return
+    out.mkdir(parents=True, exist_ok=True)
+    path.write_text(json.dumps(setup, indent=2) + "\n")
+
+
+def table_markdown(table: dict, domains, counts) -> str:
+    """Table 5.1 with ours beside the thesis's, then capture-time medians."""
+    head = "| domain | " + " | ".join(f"{n} pursuer{'s' if n > 1 else ''}" for n in counts) + " |"
+    lines = [
+        "% of trials where area pursuit captured sooner than pure pursuit: ours (thesis)",
+        "",
+        head,
+        "|---" * (len(counts) + 1) + "|",
+    ]
+    for domain in domains:
+        cells = []
+        for n in counts:
+            row = table.get(f"{domain}/{n}")
+            if row is None:
+                cells.append("-")
+                continue
+            thesis = "" if row["thesis_percent"] is None else f" ({row['thesis_percent']:.1f})"
+            cells.append(f"{row['area_faster_percent']:.1f}{thesis}, n={row['trials']}")
+        lines.append(f"| {domain} | " + " | ".join(cells) + " |")
+    lines += ["", "median capture time [quartiles], area / pure (uncaptured within the limit)", ""]
+    lines += [head, "|---" * (len(counts) + 1) + "|"]
+    for domain in domains:
+        cells = []
+        for n in counts:
+            row = table.get(f"{domain}/{n}")
+            if row is None:
+                cells.append("-")
+                continue
+            a, p = row["area_time_quartiles"], row["pure_time_quartiles"]
+            cells.append(f"{_q(a)} / {_q(p)} ({row['area_uncaptured']}/{row['pure_uncaptured']})")
+        lines.append(f"| {domain} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _q(quartiles) -> str:
+    if quartiles[1] is None:
+        return "-"
+    return f"{quartiles[1]:.1f} [{quartiles[0]:.1f}, {quartiles[2]:.1f}]"
