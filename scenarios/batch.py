@@ -73,6 +73,7 @@ def run_batch(
     todo = [t for t in tasks if t["key"] not in results]
     if not todo:
         return results
+    _end_last_line(out)
     with out.open("a", encoding="utf-8") as sink:
 
         def record(result: dict) -> None:
@@ -88,6 +89,15 @@ def run_batch(
         else:
             _run_dask(todo, work, scheduler, record, out)
     return results
+
+
+def _end_last_line(path: Path) -> None:
+    """Close a last line cut short by a crash, so new results start on a line of their own."""
+    if path.exists() and path.stat().st_size > 0:
+        with path.open("rb+") as f:
+            f.seek(-1, os.SEEK_END)
+            if f.read(1) != b"\n":
+                f.write(b"\n")
 
 
 def _run_local(todo, work, workers, record, out) -> None:

@@ -64,6 +64,8 @@ def test_a_line_cut_short_by_a_crash_is_redone(tmp_path):
     results = run_batch(tasks(tmp_path, n=3), square, out, workers=1)
     assert sorted(results) == ["t0", "t1", "t2"] and results["t1"]["value"] == 1
     assert runs_of(tmp_path, "t0") == 0 and runs_of(tmp_path, "t1") == 1
+    # The new results start on lines of their own: a fresh read finds them all.
+    assert sorted(read_results(out)) == ["t0", "t1", "t2"]
 
 
 def test_duplicate_keys_are_refused(tmp_path):
