@@ -119,15 +119,22 @@ def time_to_capture(psi, spacing, radius: float) -> np.ndarray:
         raise InputError(f"capture radius must be a finite number >= 0, got {radius}")
     if radius == 0:
         return psi
-    # The disk is a union of chords along y, one per x offset: a running
-    # minimum along each row per distinct chord length, then a minimum over x
-    # offsets. The cost grows with the radius in cells, not the disk's area.
+    return _disk_min(np.ascontiguousarray(psi), disk_widths(radius, hx, hy))
+
+
+def disk_widths(radius: float, hx: float, hy: float) -> np.ndarray:
+    """The capture disk as chords along y, one per x offset ``i``: the node
+    offsets ``(i, j)`` with ``|j| <= widths[|i|]``. ``time_to_capture`` takes
+    a running minimum along each row per distinct chord length, then a
+    minimum over x offsets, so its cost grows with the radius in cells, not
+    the disk's area."""
+    if radius == 0:
+        return np.zeros(1, dtype=np.int64)
     reach = radius * (1 + 1e-12)
-    widths = np.array(
+    return np.array(
         [int(math.sqrt(max(reach**2 - (i * hx) ** 2, 0.0)) // hy) for i in range(int(reach // hx) + 1)],
         dtype=np.int64,
     )
-    return _disk_min(np.ascontiguousarray(psi), widths)
 
 
 @dataclass(frozen=True)

@@ -573,7 +573,7 @@ class _Boundary:
         self.front = arena._front(p)
         self.speed = float(speed)
         (lx, ly), (hx, hy) = arena._lo, arena._h
-        widths = _disk_widths(radius, hx, hy)
+        widths = fmm.disk_widths(radius, hx, hy)
         self.xa = _capture_points(self.front.psi, a, widths)
         self.xb = _capture_points(self.front.psi, b, widths)
         self._args = (
@@ -642,17 +642,6 @@ def _radius(value) -> float:
     if not (r >= 0 and math.isfinite(r)):
         raise InputError(f"capture radius must be a finite number >= 0, got {value!r}")
     return r
-
-
-def _disk_widths(radius: float, hx: float, hy: float) -> np.ndarray:
-    """Chord half-widths of the capture disk, as ``fmm.time_to_capture`` takes them."""
-    if radius == 0:
-        return np.zeros(1, dtype=np.int64)
-    reach = radius * (1 + 1e-12)
-    return np.array(
-        [int(math.sqrt(max(reach**2 - (i * hx) ** 2, 0.0)) // hy) for i in range(int(reach // hx) + 1)],
-        dtype=np.int64,
-    )
 
 
 # ---------------------------------------------------------------------- kernels

@@ -97,36 +97,33 @@ def _check_setup(out: Path, setup: dict) -> None:
 
 def table_markdown(table: dict, domains, counts) -> str:
     """Table 5.1 with ours beside the thesis's, then capture-time medians."""
-    head = "| domain | " + " | ".join(f"{n} pursuer{'s' if n > 1 else ''}" for n in counts) + " |"
+
+    def share(row) -> str:
+        thesis = "" if row["thesis_percent"] is None else f" ({row['thesis_percent']:.1f})"
+        return f"{row['area_faster_percent']:.1f}{thesis}, n={row['trials']}"
+
+    def times(row) -> str:
+        a, p = row["area_time_quartiles"], row["pure_time_quartiles"]
+        return f"{_q(a)} / {_q(p)} ({row['area_uncaptured']}/{row['pure_uncaptured']})"
+
+    return "\n".join([
+        "% of trials where area pursuit captured sooner than pure pursuit: ours (thesis)", "",
+        *_grid(table, domains, counts, share), "",
+        "median capture time [quartiles], area / pure (uncaptured within the limit)", "",
+        *_grid(table, domains, counts, times),
+    ])  # fmt: skip
+
+
+def _grid(table: dict, domains, counts, cell) -> list[str]:
+    """A Markdown table: a row per domain, a column per pursuer count."""
     lines = [
-        "% of trials where area pursuit captured sooner than pure pursuit: ours (thesis)",
-        "",
-        head,
+        "| domain | " + " | ".join(f"{n} pursuer{'s' if n > 1 else ''}" for n in counts) + " |",
         "|---" * (len(counts) + 1) + "|",
     ]
     for domain in domains:
-        cells = []
-        for n in counts:
-            row = table.get(f"{domain}/{n}")
-            if row is None:
-                cells.append("-")
-                continue
-            thesis = "" if row["thesis_percent"] is None else f" ({row['thesis_percent']:.1f})"
-            cells.append(f"{row['area_faster_percent']:.1f}{thesis}, n={row['trials']}")
-        lines.append(f"| {domain} | " + " | ".join(cells) + " |")
-    lines += ["", "median capture time [quartiles], area / pure (uncaptured within the limit)", ""]
-    lines += [head, "|---" * (len(counts) + 1) + "|"]
-    for domain in domains:
-        cells = []
-        for n in counts:
-            row = table.get(f"{domain}/{n}")
-            if row is None:
-                cells.append("-")
-                continue
-            a, p = row["area_time_quartiles"], row["pure_time_quartiles"]
-            cells.append(f"{_q(a)} / {_q(p)} ({row['area_uncaptured']}/{row['pure_uncaptured']})")
-        lines.append(f"| {domain} | " + " | ".join(cells) + " |")
-    return "\n".join(lines)
+        rows = [table.get(f"{domain}/{n}") for n in counts]
+        lines.append(f"| {domain} | " + " | ".join("-" if row is None else cell(row) for row in rows) + " |")
+    return lines
 
 
 def _q(quartiles) -> str:
