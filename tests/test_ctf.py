@@ -375,7 +375,7 @@ def test_states_inside_a_building_are_refused_naming_the_player(campus):
 
 def test_the_return_phase_of_a_game_solved_for_flag_capture_only_is_refused(capture_only):
     arena = capture_only.arena
-    (xmin, ymin), (xmax, ymax) = arena.grid.lo, arena.grid.hi
+    (xmin, ymin), (xmax, _) = arena.grid.lo, arena.grid.hi
     a, d = (xmin + 1.0, ymin + 1.0), (xmax - 1.0, ymin + 1.0)
     assert capture_only.evaluate(a, d, "capture").value == pytest.approx(capture_only.evaluate(a, d).value)
     with pytest.raises(InputError, match="R_A"):
