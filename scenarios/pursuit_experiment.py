@@ -17,12 +17,13 @@ infinitely long.
 Each trial is one task with its own seed (a ``numpy.random.SeedSequence``
 spawned from the run's seed, the domain, the pursuer count and the trial
 number), so any trial can be rerun alone and gives the same result on any
-worker.
+worker and in any run that includes it.
 """
 
 from __future__ import annotations
 
 import math
+import zlib
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 
@@ -53,7 +54,10 @@ class PursuitSetup:
 def trial_tasks(domains, pursuer_counts, trials: int, seed: int, setup: PursuitSetup) -> list[dict]:
     """One task per (domain, pursuer count, trial number), in that order."""
     tasks = []
-    for d, domain in enumerate(domains):
+    for domain in domains:
+        # The domain enters the seed by name, not by its place in the list,
+        # so a trial is the same whichever other domains a run includes.
+        d = zlib.crc32(domain.encode())
         for n in pursuer_counts:
             for index in range(trials):
                 tasks.append({
@@ -76,8 +80,11 @@ def run_trial(task: dict) -> dict:
     evader, pursuers = domain.initial_condition(rng, task["pursuers"], setup.separation)
     times = {}
     for name in ("area", "pure"):
+        # One arena per chase, shared by the evader and the pursuers, so the
+        # fronts and the safe set one computes for a state serve the other.
+        arena = domain.arena()
         chase = pursue(
-            domain.strategy(name), domain.evader(), evader, pursuers, passable=domain.passable, dt=setup.dt,
+            domain.strategy(name, arena), domain.evader(arena), evader, pursuers, passable=domain.passable, dt=setup.dt,
             capture_radius=setup.capture_radius, evader_speed=setup.speed, pursuer_speeds=setup.speed,
             max_time=setup.max_time,
         )  # fmt: skip
@@ -182,7 +189,7 @@ class _Domain:
                 chosen.append(p)
         return evader, np.array(chosen)
 
-    def strategy(self, name: str):
+    def strategy(self, name: str, arena):
         if self.kind == "convex":
             from solvers.pursuit import ConvexAreaPursuit, StraightPursuit
 
@@ -190,21 +197,24 @@ class _Domain:
         from solvers.pursuit_fmm import FmmAreaPursuit, GeodesicPursuit
 
         if name == "area":
-            return FmmAreaPursuit(self.arena(), evader_speed=self.speed, pursuer_speeds=self.speed,
+            return FmmAreaPursuit(arena, evader_speed=self.speed, pursuer_speeds=self.speed,
                                   capture_radius=self.capture_radius, gradient=self.gradient)  # fmt: skip
-        return GeodesicPursuit(self.arena())
+        return GeodesicPursuit(arena)
 
-    def evader(self):
+    def evader(self, arena):
         if self.kind == "convex":
             from solvers.pursuit import ConvexFarthestPointEvader
 
             return ConvexFarthestPointEvader(self.polygon, self.capture_radius)
         from solvers.pursuit_fmm import FarthestPointEvader
 
-        return FarthestPointEvader(self.arena(), evader_speed=self.speed, pursuer_speeds=self.speed,
+        return FarthestPointEvader(arena, evader_speed=self.speed, pursuer_speeds=self.speed,
                                    capture_radius=self.capture_radius)  # fmt: skip
 
     def arena(self):
+        """The fast-marching arena of a non-convex domain (None for a convex one, which needs none)."""
+        if self.kind == "convex":
+            return None
         from solvers.pursuit_fmm import FmmArena
 
         return FmmArena(self.grid, self.raster_speed)

@@ -76,3 +76,9 @@ def test_a_run_directory_of_another_setup_and_unknown_domains_are_refused(tmp_pa
     assert other.returncode == 2 and "another setup (dt 0.1 -> 0.05)" in other.stderr
     unknown = bearcat("experiment", "pursuit", "--domain", "moon-3", "--out", str(out))
     assert unknown.returncode == 2 and "unknown domain 'moon-3'" in unknown.stderr
+
+
+def test_a_trial_does_not_depend_on_the_other_domains_of_the_run():
+    alone = trial_tasks(["triangle-10"], [2], 3, 5, PursuitSetup())[1]
+    among = trial_tasks(["square-10", "maze-10", "triangle-10"], [1, 2], 3, 5, PursuitSetup())
+    assert alone in among
