@@ -418,7 +418,22 @@ def _safe_set(arena: FmmArena, e, ps, ve: float, speeds, radius: float, remember
 # ---------------------------------------------------------------------- strategies
 
 
-class FmmAreaPursuit:
+class _Game:
+    """The arena and the game's speeds and capture radius, checked once,
+    shared by the strategies and the evader that need the safe set."""
+
+    def __init__(self, arena: FmmArena, evader_speed, pursuer_speeds, capture_radius) -> None:
+        self.arena = arena
+        self.evader_speed = _speed(evader_speed, "evader speed")
+        self.pursuer_speeds = _speeds(pursuer_speeds, None)
+        self.capture_radius = _radius(capture_radius)
+
+    def _safe(self, e: np.ndarray, ps: np.ndarray) -> SafeSet:
+        speeds = _speeds(self.pursuer_speeds, len(ps))
+        return _safe_set(self.arena, e, ps, self.evader_speed, speeds, self.capture_radius)
+
+
+class FmmAreaPursuit(_Game):
     """Pursuers that shrink the area of ``S_e`` (thesis 5.2.2); the module
     notes describe the two ``gradient`` methods. ``"boundary"`` is the
     default: it follows the area where one-cell differences of a node count
@@ -441,10 +456,7 @@ class FmmAreaPursuit:
     ):
         if gradient not in _GRADIENTS:
             raise InputError(f"gradient must be one of {', '.join(_GRADIENTS)}, got {gradient!r}")
-        self.arena = arena
-        self.evader_speed = _speed(evader_speed, "evader speed")
-        self.pursuer_speeds = _speeds(pursuer_speeds, None)
-        self.capture_radius = _radius(capture_radius)
+        super().__init__(arena, evader_speed, pursuer_speeds, capture_radius)
         self.gradient = gradient
 
     def area_gradient(self, evader, pursuers) -> AreaGradient:
@@ -475,7 +487,7 @@ class FmmAreaPursuit:
         arena = self.arena
         n = len(ps)
         speeds = _speeds(self.pursuer_speeds, n)
-        safe = _safe_set(arena, e, ps, self.evader_speed, speeds, self.capture_radius)
+        safe = self._safe(e, ps)
         a, b, owner = _boundary_edges(arena, safe)
         length = np.zeros(n)
         bounds: dict[int, _Boundary] = {}
@@ -513,7 +525,7 @@ class GeodesicPursuit:
         return np.array([arena._toward(front, p) for p in ps]).reshape(-1, 2)
 
 
-class FarthestPointEvader:
+class FarthestPointEvader(_Game):
     """The evader of thesis 5.3.2: it heads for ``y*``, the node of ``S_e`` it
     reaches last along safe paths (``argmax phi``), keeps that target until
     within half the capture radius of it (at least one spacing, so that point
@@ -530,10 +542,7 @@ class FarthestPointEvader:
         pursuer_speeds=1.0,
         capture_radius: float = 0.5,
     ):
-        self.arena = arena
-        self.evader_speed = _speed(evader_speed, "evader speed")
-        self.pursuer_speeds = _speeds(pursuer_speeds, None)
-        self.capture_radius = _radius(capture_radius)
+        super().__init__(arena, evader_speed, pursuer_speeds, capture_radius)
         self.target: np.ndarray | None = None
         self.retargets = 0
 
@@ -546,8 +555,7 @@ class FarthestPointEvader:
         e = arena._point(evader, "evader")
         if self.target is None or math.hypot(*(self.target - e)) <= self.arrival_radius:
             ps = arena._points(pursuers, "pursuers")
-            speeds = _speeds(self.pursuer_speeds, len(ps))
-            safe = _safe_set(arena, e, ps, self.evader_speed, speeds, self.capture_radius)
+            safe = self._safe(e, ps)
             if safe.mask.any():
                 far = int(np.argmax(np.where(safe.mask, safe.evader_time, -np.inf)))
                 self.target = arena.grid.point(np.unravel_index(far, safe.mask.shape))
