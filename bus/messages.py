@@ -1,0 +1,147 @@
+"""The typed messages of the bus, one schema version for all.
+
+Positions on the wire are WGS84 degrees (what phones and PX4 report),
+headings degrees clockwise from north in ``[0, 360)``, times seconds on the
+sender's clock (virtual in simulation, Unix time in live runs). Every field
+carries its range, so decoding rejects out-of-range, NaN and infinite
+numbers, unknown fields and oversized lists before any agent sees them.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Literal, Union
+
+import msgspec
+
+SCHEMA_VERSION = 1
+
+Name = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,64}$")]
+Latitude = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
+Longitude = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
+Heading = Annotated[float, msgspec.Meta(ge=0.0, lt=360.0)]
+Time = Annotated[float, msgspec.Meta(ge=0.0, le=1e12)]
+Metres = Annotated[float, msgspec.Meta(ge=0.0, le=1e7)]
+Altitude = Annotated[float, msgspec.Meta(ge=-1e4, le=1e5)]
+Speed = Annotated[float, msgspec.Meta(ge=0.0, le=1e3)]
+Sequence = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
+Point = tuple[Latitude, Longitude]
+# A closed ring or an open line of up to 4096 points; up to 64 of them.
+Line = Annotated[list[Point], msgspec.Meta(max_length=4096)]
+Lines = Annotated[list[Line], msgspec.Meta(max_length=64)]
+Text = Annotated[str, msgspec.Meta(max_length=200)]
+
+
+class Message(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
+    """Base of every message: ``v`` is the schema version; other versions are refused."""
+
+    v: int = SCHEMA_VERSION
+
+    def __post_init__(self):
+        if self.v != SCHEMA_VERSION:
+            raise ValueError(f"schema version {self.v} is not the supported {SCHEMA_VERSION}")
+
+
+class Fix(Message, tag="fix"):
+    """A position report from an agent's phone GPS or a UAV's telemetry.
+    ``accuracy`` is the reported horizontal error (metres, 1 sigma); ``heading``
+    the compass; ``seq`` counts the sender's fixes, so a receiver can tell a
+    lost fix from a late one."""
+
+    agent: Name
+    seq: Sequence
+    t: Time
+    lat: Latitude
+    lon: Longitude
+    alt: Altitude | None = None
+    heading: Heading | None = None
+    accuracy: Metres | None = None
+
+
+class Truth(Message, tag="truth"):
+    """Where an agent really is (simulation only; for the referee and the recorder)."""
+
+    agent: Name
+    t: Time
+    lat: Latitude
+    lon: Longitude
+    alt: Altitude | None = None
+    heading: Heading | None = None
+
+
+class Report(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
+    """An agent as the guidance saw it: its last delivered fix and that fix's time."""
+
+    agent: Name
+    t: Time
+    lat: Latitude
+    lon: Longitude
+
+
+class Guidance(Message, tag="guidance"):
+    """What one agent's screen shows, computed from the fixes the network delivered.
+
+    ``game`` names the solver behind it; ``heading`` is the recommended
+    direction at full speed (None: no recommendation); ``region`` the
+    opponent's winning region as polygons (exterior rings) and ``region_of``
+    whose region it is; ``go`` the go / no-go verdict where the game has
+    one; ``value`` the solver's value at the current state (time to win, area
+    of the safe set, ...); ``boundary`` open lines to show (a pursuer's active
+    boundary, a planned path); ``reports`` every agent as last reported."""
+
+    agent: Name
+    seq: Sequence
+    t: Time
+    game: Literal["ctf", "reach-avoid", "pursuit", "search", "none"]
+    heading: Heading | None = None
+    region: Lines = []
+    region_of: Name | None = None
+    go: bool | None = None
+    value: float | None = None
+    boundary: Lines = []
+    reports: Annotated[list[Report], msgspec.Meta(max_length=64)] = []
+    note: Text = ""
+
+    def __post_init__(self):
+        super().__post_init__()
+        if self.value is not None and not math.isfinite(self.value):
+            raise ValueError("value must be finite")
+
+
+class GameState(Message, tag="state"):
+    """The referee's view of the game. ``phase`` moves waiting -> running
+    (-> paused -> running) -> ended; ``winner`` is a team and ``reason`` says why."""
+
+    seq: Sequence
+    t: Time
+    phase: Literal["waiting", "running", "paused", "ended"]
+    elapsed: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] = 0.0
+    winner: Name | None = None
+    reason: Text = ""
+    flag_holder: Name | None = None
+    captured: Annotated[list[Name], msgspec.Meta(max_length=64)] = []
+    judged_on: Literal["truth", "fixes"] = "truth"
+
+
+class Control(Message, tag="control"):
+    """A command to every peer of a game."""
+
+    t: Time
+    command: Literal["start", "pause", "resume", "stop"]
+    reason: Text = ""
+
+
+class UavTask(Message, tag="uav-task"):
+    """Where a UAV should go: a search target or a waypoint; land or hold in place."""
+
+    uav: Name
+    seq: Sequence
+    t: Time
+    kind: Literal["search", "waypoint", "hold", "land"]
+    lat: Latitude
+    lon: Longitude
+    alt: Altitude
+
+
+AnyMessage = Union[Fix, Truth, Guidance, GameState, Control, UavTask]
+MESSAGE_TYPES = (Fix, Truth, Guidance, GameState, Control, UavTask)

@@ -1,0 +1,145 @@
+"""Zenoh sessions for live runs, with the interface of ``LocalSession``.
+
+Set-up that works on a single host and across machines: peer mode, every
+peer listening (Zenoh forwards only to peers that listen), multicast
+scouting off (on a host whose loopback has no multicast it scouts out of the
+wrong interface, slowly), explicit endpoints to connect to, and a 1 s link
+lease so a frozen peer's liveliness vanishes within about a second.
+
+Fixes go best effort with congestion control DROP (a lost fix is lost, not
+delivered late in a burst); everything else reliable with BLOCK. Every put
+carries the sender's session name as its attachment, which is how the
+receiver's netem shim knows the directed link a message came over.
+
+Subscriber callbacks run on a Zenoh-owned thread: they must be short (the
+live runtime's hand the sample to its asyncio loop and return), and an
+exception in one is logged and counted in ``callback_errors``, never lost
+silently.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+
+import zenoh
+
+from bus import keys
+from bus.errors import BusError
+from bus.inprocess import Callback, LivelinessCallback
+
+log = logging.getLogger(__name__)
+
+LOOPBACK_LISTEN = "tcp/127.0.0.1:0"
+LEASE_MS = 1000
+
+
+def config(
+    *,
+    listen: list[str] | None = None,
+    connect: list[str] | None = None,
+    mode: str = "peer",
+    multicast: bool = False,
+    lease_ms: int = LEASE_MS,
+) -> zenoh.Config:
+    """A Zenoh configuration; ``listen`` defaults to an ephemeral loopback port."""
+    if mode not in ("peer", "client", "router"):
+        raise BusError(f"zenoh mode {mode!r} is not peer, client or router")
+    listen = [LOOPBACK_LISTEN] if listen is None else list(listen)
+    connect = list(connect or [])
+    for endpoint in (*listen, *connect):
+        if not isinstance(endpoint, str) or "/" not in endpoint:
+            raise BusError(f"endpoint {endpoint!r} is not of the form PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+    c = zenoh.Config()
+    try:
+        c.insert_json5("mode", json.dumps(mode))
+        c.insert_json5("scouting/multicast/enabled", json.dumps(bool(multicast)))
+        c.insert_json5("listen/endpoints", json.dumps(listen))
+        c.insert_json5("connect/endpoints", json.dumps(connect))
+        c.insert_json5("transport/link/tx/lease", json.dumps(int(lease_ms)))
+        c.insert_json5("timestamping/enabled", "true")
+    except zenoh.ZError as exc:
+        raise BusError(f"zenoh rejected the configuration: {exc}") from None
+    return c
+
+
+class ZenohSession:
+    """One peer's Zenoh session, named ``name`` (the sender id on its puts)."""
+
+    def __init__(self, name: str, zconfig: zenoh.Config | None = None) -> None:
+        self.name = keys.check_name(name, "session name")
+        self.closed = False
+        self.callback_errors = 0
+        self._lock = threading.Lock()
+        self._session = zenoh.open(zconfig if zconfig is not None else config())
+        self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
+        self._declared: list = []  # subscribers and tokens, undeclared on close
+        self._attachment = self.name.encode()
+
+    def put(self, key: str, payload: bytes, *, reliable: bool = True) -> None:
+        self._check_open()
+        publisher = self._publishers.get((key, reliable))
+        if publisher is None:
+            publisher = self._session.declare_publisher(
+                key,
+                reliability=zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT,
+                congestion_control=zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP,
+            )
+            self._publishers[(key, reliable)] = publisher
+        publisher.put(bytes(payload), attachment=self._attachment)
+
+    def subscribe(self, key_expr: str, callback: Callback) -> None:
+        self._check_open()
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else ""
+                callback(str(sample.key_expr), sample.payload.to_bytes(), sender)
+            except Exception:  # noqa: BLE001 - Zenoh would print and swallow it
+                self._callback_failed(key_expr)
+
+        self._declared.append(self._session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample)))
+
+    def declare_token(self, key: str) -> None:
+        self._check_open()
+        self._declared.append(self._session.liveliness().declare_token(key))
+
+    def subscribe_liveliness(self, key_expr: str, callback: LivelinessCallback, *, history: bool = True) -> None:
+        self._check_open()
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            try:
+                callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+            except Exception:  # noqa: BLE001
+                self._callback_failed(key_expr)
+
+        subscriber = self._session.liveliness().declare_subscriber(
+            key_expr, zenoh.handlers.Callback(on_sample), history=history
+        )
+        self._declared.append(subscriber)
+
+    def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
+        self._check_open()
+        replies = self._session.liveliness().get(key_expr, timeout=timeout)
+        return sorted(str(r.ok.key_expr) for r in replies if r.ok is not None)
+
+    def close(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        for entity in reversed(self._declared):
+            try:
+                entity.undeclare()
+            except zenoh.ZError:
+                pass
+        self._session.close()
+
+    def _callback_failed(self, key_expr: str) -> None:
+        with self._lock:
+            self.callback_errors += 1
+        log.exception("a callback of %s on %s raised", self.name, key_expr)
+
+    def _check_open(self) -> None:
+        if self.closed:
+            raise BusError(f"session {self.name!r} is closed")

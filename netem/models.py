@@ -1,0 +1,181 @@
+"""Impairment models, pure and seeded: every draw comes from a
+``numpy.random.Generator`` the caller owns, so a link or a sensor replays
+exactly for a seed.
+
+Link models follow Linux ``tc netem`` where it has the same knob (delay with
+jitter and a distribution, Bernoulli and Gilbert-Elliott loss, duplication,
+reordering, rate), plus what a cellular link adds: outages in time windows,
+no signal in map regions, and the radio's promotion delay for the first
+packet after it went idle (HSPA: 1-2.6 s). Sensor models: GPS error as a
+first-order Gauss-Markov (Ornstein-Uhlenbeck) bias plus white noise, larger
+near buildings, with dropouts; compass error as a per-run bias plus noise.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+DISTRIBUTIONS = ("constant", "uniform", "normal", "pareto", "lognormal")
+
+
+@dataclass(frozen=True)
+class Delay:
+    """One-way delay ``base`` plus a ``jitter`` of the given ``distribution``
+    (its standard deviation; the half-width for ``uniform``; for ``pareto``
+    and ``lognormal`` the jitter is one-sided with that standard deviation,
+    the heavy tail of cellular links). Never below zero."""
+
+    base: float = 0.0
+    jitter: float = 0.0
+    distribution: str = "normal"
+
+    def sample(self, rng: np.random.Generator) -> float:
+        j = self.jitter
+        if j == 0.0 or self.distribution == "constant":
+            return self.base
+        if self.distribution == "uniform":
+            extra = rng.uniform(-j, j)
+        elif self.distribution == "normal":
+            extra = rng.normal(0.0, j)
+        elif self.distribution == "pareto":
+            # Lomax with shape 3 scaled to standard deviation j (mean j / sqrt 3).
+            extra = rng.pareto(3.0) * (2.0 * j / math.sqrt(3.0))
+        else:  # lognormal with sigma 1 scaled to standard deviation j (mean j / sqrt(e - 1) ~ 0.76 j)
+            scale = j / math.sqrt((math.e - 1.0) * math.e)
+            extra = rng.lognormal(math.log(scale), 1.0)
+        return max(0.0, self.base + float(extra))
+
+
+@dataclass(frozen=True)
+class GilbertElliott:
+    """Two-state burst loss: a good state losing ``loss_good`` of packets and
+    a bad one losing ``loss_bad``; each packet moves good -> bad with ``p``
+    and bad -> good with ``r`` (``tc netem loss gemodel p r 1-h 1-k``).
+    Mean burst length ``1 / r``; stationary loss
+    ``(r loss_good + p loss_bad) / (p + r)``."""
+
+    p: float
+    r: float
+    loss_good: float = 0.0
+    loss_bad: float = 1.0
+
+    @property
+    def stationary_loss(self) -> float:
+        if self.p + self.r == 0.0:
+            return self.loss_good
+        return (self.r * self.loss_good + self.p * self.loss_bad) / (self.p + self.r)
+
+
+@dataclass(frozen=True)
+class Outage:
+    """No link at all from ``start`` to ``end`` (seconds of game time)."""
+
+    start: float
+    end: float
+
+    def covers(self, t: float) -> bool:
+        return self.start <= t < self.end
+
+
+@dataclass(frozen=True)
+class LinkModel:
+    """Everything that happens to a message on one directed link.
+
+    ``loss`` is Bernoulli, ``burst`` Gilbert-Elliott (both may apply);
+    ``duplicate`` the chance of a second copy (its own delay draw);
+    ``reorder`` the chance a best-effort message skips the delay's base
+    (netem's reordering: it overtakes those still in flight); ``rate`` in
+    bytes per second serialises messages (0: unlimited); ``idle_after``
+    seconds without traffic demote the radio, and the next message waits a
+    promotion delay drawn uniformly from ``promotion``; ``outages`` are time
+    windows without signal. ``retransmit`` is how long a reliable message
+    waits before each new try after a loss (reliable messages are never
+    dropped, only late, as over Zenoh's TCP links)."""
+
+    delay: Delay = field(default_factory=Delay)
+    loss: float = 0.0
+    burst: GilbertElliott | None = None
+    duplicate: float = 0.0
+    reorder: float = 0.0
+    rate: float = 0.0
+    idle_after: float = 0.0
+    promotion: tuple[float, float] = (0.0, 0.0)
+    outages: tuple[Outage, ...] = ()
+    retransmit: float = 0.2
+
+    @property
+    def ideal(self) -> bool:
+        return self == LinkModel(retransmit=self.retransmit)
+
+
+@dataclass(frozen=True)
+class GpsError:
+    """Phone GPS error in metres (east, north).
+
+    A bias per axis following a first-order Gauss-Markov process with
+    standard deviation ``bias_sigma`` and correlation time ``tau`` (seconds),
+    plus white noise ``noise_sigma``; both scale by ``urban_factor`` within
+    ``urban_distance`` of a building (multipath, blocked sky). A fix is not
+    produced with probability ``dropout`` (``urban_dropout`` near buildings)."""
+
+    bias_sigma: float = 0.0
+    tau: float = 60.0
+    noise_sigma: float = 0.0
+    urban_factor: float = 1.0
+    urban_distance: float = 0.0
+    dropout: float = 0.0
+    urban_dropout: float = 0.0
+
+    def horizontal_sigma(self, urban: bool = False) -> float:
+        """Standard deviation of the error per axis at steady state."""
+        s = math.hypot(self.bias_sigma, self.noise_sigma)
+        return s * (self.urban_factor if urban else 1.0)
+
+
+@dataclass(frozen=True)
+class CompassError:
+    """Phone compass error in degrees: a bias drawn once per phone and white noise."""
+
+    bias_sigma: float = 0.0
+    noise_sigma: float = 0.0
+
+
+class GpsTrack:
+    """The error one phone's GPS makes, fix after fix (stateful: the bias)."""
+
+    def __init__(self, model: GpsError, rng: np.random.Generator) -> None:
+        self.model = model
+        self.rng = rng
+        self.bias = rng.normal(0.0, model.bias_sigma, size=2) if model.bias_sigma > 0 else np.zeros(2)
+        self._t: float | None = None
+
+    def error(self, t: float, distance_to_building: float = math.inf) -> np.ndarray | None:
+        """The (east, north) error of a fix taken at ``t``, or None for a dropout."""
+        m = self.model
+        urban = distance_to_building <= m.urban_distance
+        scale = m.urban_factor if urban else 1.0
+        if self._t is not None and m.bias_sigma > 0:
+            # Exact discretisation of the OU process over the elapsed time.
+            a = math.exp(-max(t - self._t, 0.0) / m.tau)
+            self.bias = a * self.bias + m.bias_sigma * math.sqrt(1.0 - a * a) * self.rng.normal(size=2)
+        self._t = t
+        noise = self.rng.normal(0.0, m.noise_sigma, size=2) if m.noise_sigma > 0 else np.zeros(2)
+        if self.rng.random() < (m.urban_dropout if urban else m.dropout):
+            return None
+        return scale * (self.bias + noise)
+
+
+class CompassTrack:
+    """One phone's compass: heading in, heading as the phone reports it out (radians)."""
+
+    def __init__(self, model: CompassError, rng: np.random.Generator) -> None:
+        self.model = model
+        self.rng = rng
+        self.bias = math.radians(rng.normal(0.0, model.bias_sigma)) if model.bias_sigma > 0 else 0.0
+
+    def reading(self, heading: float) -> float:
+        noise = math.radians(self.rng.normal(0.0, self.model.noise_sigma)) if self.model.noise_sigma > 0 else 0.0
+        return (heading + self.bias + noise) % (2.0 * math.pi)
