@@ -10,7 +10,7 @@ from shapely.geometry import Point, box
 
 from maps import ROLES, Map, MapError, Region, Zone, list_maps, load_map, rasterize
 
-BUILT_IN = ["campus-200", "campus-400", "ctf-10", "field-50", "field-80x40", "maze-10", "square-10", "triangle-10"]
+BUILT_IN = ["campus-200", "campus-400", "ctf-10", "field-50", "field-80x40", "maze-10", "maze-deadend-10", "square-10", "triangle-10"]
 ORIGIN = (37.8719, -122.2585)
 
 
@@ -188,6 +188,7 @@ EXPECTED_REGIONS = {
     "square-10": {},
     "triangle-10": {},
     "maze-10": {},
+    "maze-deadend-10": {},
 }
 
 
@@ -239,8 +240,15 @@ def test_field_80x40_has_team_sides():
     assert (m.region("west").team, m.region("east").team) == ("pursuers", "evader")
 
 
-def test_maze_corridors_are_about_a_capture_diameter_wide():
-    free = load_map("maze-10").free_space
+@pytest.mark.parametrize("name", ["maze-10", "maze-deadend-10"])
+def test_maze_corridors_are_about_a_capture_diameter_wide(name):
+    free = load_map(name).free_space
     # A disk of 0.49 m radius passes everywhere; one of 0.8 m is stuck in parts of the maze.
     assert free.buffer(-0.49).geom_type == "Polygon"
     assert free.buffer(-0.8).geom_type == "MultiPolygon"
+
+
+def test_every_maze_10_corridor_lies_on_a_loop_and_the_dead_end_maze_has_none():
+    # Free-standing walls are holes in the free space: a path can go round each.
+    assert len(load_map("maze-10").free_space.interiors) == 4
+    assert len(load_map("maze-deadend-10").free_space.interiors) == 0
