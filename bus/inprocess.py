@@ -6,9 +6,12 @@ Sessions put bytes on keys; subscribers declared with key expressions
 including their own; liveliness tokens appear and vanish for liveliness
 subscribers as they do on Zenoh (a closed session's tokens vanish with it).
 
-Delivery goes through ``deliver(receiver, fn)``: by default at once, in the
-caller's stack; the simulation runtime passes its own, which hands the put to
-the receiver's netem shim and schedules what survives in virtual time.
+Delivery goes through ``deliver(sender, receiver, key, payload, call)``,
+where ``call(payload)`` runs the receiver's matching callbacks: by default
+at once, in the caller's stack; the simulation runtime passes its own, which
+hands the put to the receiver's netem shim and schedules what survives (and
+any duplicate) in virtual time. Liveliness changes come through the same
+hook with ``payload`` None.
 Puts are best effort or reliable as on Zenoh, which in a single process
 means the same thing: loss and delay come only from netem.
 """
@@ -35,9 +38,16 @@ def _key_expr(text: str) -> zenoh.KeyExpr:
         raise BusError(f"{text!r} is not a valid key expression") from None
 
 
+Deliver = Callable[[str, str, str, "bytes | None", Callable[["bytes | None"], None]], None]
+
+
+def deliver_now(sender: str, receiver: str, key: str, payload: bytes | None, call) -> None:
+    call(payload)
+
+
 class InProcessBus:
-    def __init__(self, deliver: Callable[[str, Callable[[], None]], None] | None = None) -> None:
-        self._deliver = deliver or (lambda receiver, fn: fn())
+    def __init__(self, deliver: Deliver | None = None) -> None:
+        self._deliver = deliver or deliver_now
         self._sessions: dict[str, LocalSession] = {}
         self._tokens: dict[str, str] = {}  # key -> owning session
 
@@ -57,20 +67,22 @@ class InProcessBus:
     def _put(self, sender: str, key: str, payload: bytes) -> None:
         expr = _key_expr(key)
         for receiver in list(self._sessions.values()):
-            for sub_expr, callback in list(receiver._subscribers):
-                if sub_expr.intersects(expr):
-                    self._deliver(receiver.name, self._call(receiver, callback, key, payload, sender))
+            callbacks = [cb for sub_expr, cb in receiver._subscribers if sub_expr.intersects(expr)]
+            if callbacks:
+                self._deliver(sender, receiver.name, key, payload, self._call(receiver, callbacks, key, sender))
 
-    def _call(self, receiver, callback, key, payload, sender):
-        def fn():
-            if receiver.closed:
-                return
-            try:
-                callback(key, payload, sender)
-            except Exception:  # noqa: BLE001 - as Zenoh does: log, never unwind into the sender
-                log.exception("subscriber of %s on %s raised", receiver.name, key)
+    @staticmethod
+    def _call(receiver, callbacks, key, sender):
+        def call(payload):
+            for callback in callbacks:
+                if receiver.closed:
+                    return
+                try:
+                    callback(key, payload, sender)
+                except Exception:  # noqa: BLE001 - as Zenoh does: log, never unwind into the sender
+                    log.exception("subscriber of %s on %s raised", receiver.name, key)
 
-        return fn
+        return call
 
     def _token(self, owner: str, key: str, alive: bool) -> None:
         if alive:
@@ -83,17 +95,18 @@ class InProcessBus:
         for receiver in list(self._sessions.values()):
             for sub_expr, callback in list(receiver._liveliness):
                 if sub_expr.intersects(expr):
-                    self._deliver(receiver.name, self._call_liveliness(receiver, callback, key, alive))
+                    self._deliver(owner, receiver.name, key, None, self._call_liveliness(receiver, callback, key, alive))
 
-    def _call_liveliness(self, receiver, callback, key, alive):
-        def fn():
+    @staticmethod
+    def _call_liveliness(receiver, callback, key, alive):
+        def call(_payload=None):
             if not receiver.closed:
                 try:
                     callback(key, alive)
                 except Exception:  # noqa: BLE001
                     log.exception("liveliness subscriber of %s on %s raised", receiver.name, key)
 
-        return fn
+        return call
 
     def _alive(self, expr: str) -> list[str]:
         e = _key_expr(expr)
@@ -135,7 +148,8 @@ class LocalSession:
         self._liveliness.append((expr, callback))
         if history:
             for key in self.bus._alive(key_expr):
-                self.bus._deliver(self.name, self.bus._call_liveliness(self, callback, key, True))
+                owner = self.bus._tokens[key]
+                self.bus._deliver(owner, self.name, key, None, self.bus._call_liveliness(self, callback, key, True))
 
     def alive(self, key_expr: str) -> list[str]:
         return self.bus._alive(key_expr)

@@ -41,6 +41,16 @@ _KINDS = {
 }
 
 
+BEST_EFFORT_KINDS = ("fix", "guidance", "truth")
+"""Streams where a newer message replaces an older one: a lost one is lost,
+not delivered late in a burst. Every other kind goes reliably."""
+
+
+def reliable(key: str) -> bool:
+    """Whether messages on ``key`` go reliably (game state, control, UAV tasks)."""
+    return parse(key).kind not in BEST_EFFORT_KINDS
+
+
 def check_name(name: str, what: str = "name") -> str:
     """``name`` if it can stand as one key chunk, else a BusError naming it."""
     if not isinstance(name, str) or not _NAME.match(name):

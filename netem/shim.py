@@ -99,7 +99,7 @@ class Shim:
         self.where = where
         self.record = record or (lambda impairment: None)
         self._links: dict[tuple[str, str], _Link] = {}
-        self._held: list[tuple[float, str, str, str, bytes]] = []
+        self._held: list[tuple] = []
 
     def link(self, sender: str, receiver: str) -> _Link:
         state = self._links.get((sender, receiver))
@@ -109,31 +109,33 @@ class Shim:
             self._links[(sender, receiver)] = state
         return state
 
-    def transmit(self, sender: str, receiver: str, key: str, payload: bytes, now: float) -> list[Delivery]:
+    def transmit(self, sender: str, receiver: str, key: str, payload: bytes, now: float, token=None) -> list[Delivery]:
         """The arrivals of a message ``sender`` put on ``key`` at ``now`` for
-        ``receiver``: none if it is lost or held, two if duplicated."""
+        ``receiver``: none if it is lost or held, two if duplicated. A held
+        message comes back from ``poll`` with ``token``."""
         reliable, exempt = _kind(key)
         if exempt or sender == receiver or self.model.ideal and self.dead_zones is None:
             return [Delivery(now, payload)]
         if self._dead(sender, receiver):
             if reliable:
-                self._held.append((now, sender, receiver, key, payload))
+                self._held.append((now, sender, receiver, key, payload, token))
                 self._log(now, sender, receiver, key, payload, "held", None, ("dead zone",))
             else:
                 self._log(now, sender, receiver, key, payload, "dropped", None, ("dead zone",))
             return []
         return self._send(sender, receiver, key, payload, now, now, reliable)
 
-    def poll(self, now: float) -> list[tuple[str, str, str, Delivery]]:
+    def poll(self, now: float) -> list[tuple[object, Delivery]]:
         """Held reliable messages whose link has signal again at ``now``, as
-        ``(sender, receiver, key, delivery)``, in the order they were sent."""
+        ``(token, delivery)``, in the order they were sent."""
         released, still = [], []
-        for sent, sender, receiver, key, payload in self._held:
+        for held in self._held:
+            sent, sender, receiver, key, payload, token = held
             if self._dead(sender, receiver):
-                still.append((sent, sender, receiver, key, payload))
+                still.append(held)
                 continue
             for d in self._send(sender, receiver, key, payload, sent, now, True):
-                released.append((sender, receiver, key, d))
+                released.append((token, d))
         self._held = still
         return released
 
@@ -206,9 +208,9 @@ class Shim:
 
 
 def _kind(key: str) -> tuple[bool, bool]:
-    """(reliable, exempt) for a key: fixes and guidance are best effort."""
+    """(reliable, exempt) for a key."""
     try:
         kind = keys.parse(key).kind
     except BusError:
         return True, True  # not a game key: pass it through untouched
-    return kind not in ("fix", "guidance"), kind in EXEMPT_KINDS
+    return kind not in keys.BEST_EFFORT_KINDS, kind in EXEMPT_KINDS

@@ -181,14 +181,17 @@ def test_a_raising_subscriber_does_not_reach_the_sender_or_other_subscribers():
 
 def test_a_deliver_hook_sees_every_delivery_and_can_defer_it():
     queued = []
-    bus = InProcessBus(deliver=lambda receiver, fn: queued.append((receiver, fn)))
+    bus = InProcessBus(deliver=lambda *envelope: queued.append(envelope))
     a, b = bus.session("a"), bus.session("b")
     got = []
     b.subscribe(keys.state(GAME), lambda k, p, s: got.append(p))
+    b.subscribe(keys.game_wide(GAME), lambda k, p, s: got.append(p))
     a.put(keys.state(GAME), b"later")
-    assert got == [] and [r for r, _ in queued] == ["b"]
-    queued[0][1]()
-    assert got == [b"later"]
+    assert got == [] and [e[:4] for e in queued] == [("a", "b", keys.state(GAME), b"later")]
+    call = queued[0][4]
+    call(b"later")
+    call(b"twice")  # a duplicate reaches every matching subscriber again
+    assert got == [b"later", b"later", b"twice", b"twice"]
 
 
 # ---------------------------------------------------------------------- zenoh

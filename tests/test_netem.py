@@ -106,11 +106,11 @@ def test_a_dead_zone_cuts_a_phone_off_and_poll_releases_what_was_held():
         where=position.get, record=records.append,
     )  # fmt: skip
     assert shim.transmit("a1", "gs", FIX, PAYLOAD, 1.0) == []
-    assert shim.transmit("gs", "a1", STATE, PAYLOAD, 1.0) == []
+    assert shim.transmit("gs", "a1", STATE, PAYLOAD, 1.0, token="state #1") == []
     assert shim.poll(2.0) == []
     position["a1"] = (20.0, 5.0)
-    ((sender, receiver, key, delivery),) = shim.poll(4.0)
-    assert (sender, receiver, key) == ("gs", "a1", STATE) and delivery.at == pytest.approx(4.1)
+    ((token, delivery),) = shim.poll(4.0)
+    assert token == "state #1" and delivery.at == pytest.approx(4.1)
     assert [r.action for r in records] == ["dropped", "held", "delivered"]
     assert records[0].reasons == ("dead zone",) and records[2].delay == pytest.approx(3.1)
 

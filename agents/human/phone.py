@@ -1,0 +1,132 @@
+"""The phone a person carries: its GPS and compass, and the model of its screen.
+
+Fixes go out at the phone's rate through the profile's GPS error (a
+time-correlated bias, worse near buildings, with dropouts) and compass
+error, as WGS84 positions. What comes back (guidance from the ground
+station) becomes the ``Screen``: the opponent's winning region, the heading
+ring, go / no-go, and every agent as last reported with that report's time,
+so a behaviour or a person reads exactly what the display shows, stale
+positions included, and the recorder can draw it.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+import shapely
+
+from bus.messages import Fix, Guidance
+from maps import Map
+from netem.models import CompassError, CompassTrack, GpsError, GpsTrack
+
+
+@dataclass(frozen=True)
+class Sighting:
+    """An agent as the screen shows it: where (map metres) and the time of the fix."""
+
+    position: np.ndarray
+    t: float
+
+
+@dataclass
+class Screen:
+    """The display: everything is as of the last guidance received (``shown_at``)."""
+
+    shown_at: float | None = None
+    computed_at: float | None = None
+    game: str = "none"
+    heading: np.ndarray | None = None  # unit (east, north), the ring's arrow
+    region: list[np.ndarray] = field(default_factory=list)  # opponent's winning region, rings in metres
+    region_of: str | None = None
+    go: bool | None = None
+    value: float | None = None
+    boundary: list[np.ndarray] = field(default_factory=list)
+    reports: dict[str, Sighting] = field(default_factory=dict)
+    note: str = ""
+
+    def age(self, agent: str, now: float) -> float:
+        """Seconds since the fix the screen shows for ``agent`` was taken (inf if none)."""
+        seen = self.reports.get(agent)
+        return math.inf if seen is None else now - seen.t
+
+    def in_region(self, point) -> bool:
+        """Whether ``point`` lies in the displayed region."""
+        return any(shapely.Polygon(ring).covers(shapely.Point(point)) for ring in self.region if len(ring) >= 3)
+
+
+class Phone:
+    """Agent ``agent``'s phone on ``game_map``."""
+
+    def __init__(
+        self,
+        agent: str,
+        game_map: Map,
+        *,
+        gps: GpsError,
+        compass: CompassError,
+        rng: np.random.Generator,
+        fix_rate: float = 1.0,
+    ) -> None:
+        self.agent = agent
+        self.map = game_map
+        self.period = 1.0 / fix_rate
+        self.gps = GpsTrack(gps, rng)
+        self.compass = CompassTrack(compass, rng)
+        self.screen = Screen()
+        self.seq = 0
+        self.next_fix = 0.0
+        self._buildings = shapely.union_all(game_map.obstacles) if game_map.obstacles else None
+        if self._buildings is not None:
+            shapely.prepare(self._buildings)
+        self._heading = 0.0
+
+    def fix(self, now: float, position, heading: float | None) -> Fix | None:
+        """A fix of the true ``position`` (metres) and ``heading`` (radians from
+        north, None when standing) if one is due at ``now``; None if not due or
+        the GPS dropped out."""
+        if now + 1e-9 < self.next_fix:
+            return None
+        self.next_fix = max(self.next_fix + self.period, now)
+        near = math.inf if self._buildings is None else self._buildings.distance(shapely.Point(position))
+        error = self.gps.error(now, near)
+        if error is None:
+            return None
+        if heading is not None:
+            self._heading = heading
+        x, y = np.asarray(position, float) + error
+        lat, lon = self.map.to_geodetic(x, y)
+        reading = math.degrees(self.compass.reading(self._heading)) % 360.0
+        self.seq += 1
+        return Fix(
+            agent=self.agent, seq=self.seq, t=now, lat=lat, lon=lon, heading=reading if reading < 360.0 else 0.0,
+            accuracy=self.gps.model.horizontal_sigma(near <= self.gps.model.urban_distance),
+        )  # fmt: skip
+
+    def show(self, guidance: Guidance, now: float) -> None:
+        """Put a guidance message on the screen (an older one than shown is ignored)."""
+        s = self.screen
+        if s.computed_at is not None and guidance.t < s.computed_at:
+            return
+        to_local = self._to_local
+        s.shown_at, s.computed_at, s.game = now, guidance.t, guidance.game
+        s.heading = None if guidance.heading is None else _unit(math.radians(guidance.heading))
+        s.region = [to_local(ring) for ring in guidance.region]
+        s.region_of, s.go, s.value, s.note = guidance.region_of, guidance.go, guidance.value, guidance.note
+        s.boundary = [to_local(line) for line in guidance.boundary]
+        for r in guidance.reports:
+            old = s.reports.get(r.agent)
+            if old is None or r.t >= old.t:
+                s.reports[r.agent] = Sighting(np.array(self.map.to_local(r.lat, r.lon)), r.t)
+
+    def _to_local(self, points) -> np.ndarray:
+        if not points:
+            return np.zeros((0, 2))
+        lat, lon = np.asarray(points, float).T
+        return np.stack(self.map.to_local(lat, lon), axis=1)
+
+
+def _unit(bearing: float) -> np.ndarray:
+    """Unit (east, north) vector of a bearing in radians clockwise from north."""
+    return np.array([math.sin(bearing), math.cos(bearing)])
