@@ -78,7 +78,9 @@ class Shim:
 
     ``dead_zones`` is a shapely geometry in the map's local metres and
     ``where(peer)`` the peer's true position there (None for a peer that has
-    none, like the ground station); ``record`` receives every Impairment."""
+    none, like the ground station); ``record`` receives every Impairment;
+    links between two ``colocated`` peers (the ground station's services on
+    one laptop) are never impaired."""
 
     def __init__(
         self,
@@ -88,6 +90,7 @@ class Shim:
         dead_zones=None,
         where: Callable[[str], tuple[float, float] | None] | None = None,
         record: Callable[[Impairment], None] | None = None,
+        colocated: tuple[str, ...] = (),
     ) -> None:
         if dead_zones is not None and where is None:
             raise BusError("dead zones need a 'where' that gives each peer's position")
@@ -98,6 +101,7 @@ class Shim:
             shapely.prepare(dead_zones)
         self.where = where
         self.record = record or (lambda impairment: None)
+        self.colocated = tuple(colocated)
         self._links: dict[tuple[str, str], _Link] = {}
         self._held: list[tuple] = []
 
@@ -114,7 +118,8 @@ class Shim:
         ``receiver``: none if it is lost or held, two if duplicated. A held
         message comes back from ``poll`` with ``token``."""
         reliable, exempt = _kind(key)
-        if exempt or sender == receiver or self.model.ideal and self.dead_zones is None:
+        local = sender == receiver or (sender in self.colocated and receiver in self.colocated)
+        if exempt or local or self.model.ideal and self.dead_zones is None:
             return [Delivery(now, payload)]
         if self._dead(sender, receiver):
             if reliable:

@@ -54,8 +54,8 @@ RULE_KEYS = {
 # Per behaviour, its option keys and defaults.
 BEHAVIOUR_OPTIONS = {
     "follow-guidance": {},
-    "direct": {},
-    "fake-out": {"turn_every": 1.5, "spread": 60.0},
+    "direct": {"standoff": 6.0, "share": 0.5, "lead": 1.5},
+    "fake-out": {"turn_every": 1.5, "spread": 100.0, "margin": 0.0},
     "go-no-go": {"hold": None, "fresh": 2.0},
     "waypoints": {"points": None, "loop": False},
     "keyboard": {},
@@ -171,8 +171,11 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
         zones.append(tuple(c.point(p, f"scenario.dead_zones[{k}]") for p in ring))
         if len(zones[-1]) < 3:
             raise ScenarioError(f"{source}: scenario.dead_zones[{k}] needs at least 3 points")
+    name = c.text(head, "name", "scenario")
+    if not name.replace("-", "").replace("_", "").isalnum() or not name.isascii() or len(name) > 64:
+        c.fail(f"scenario.name {name!r} must be up to 64 letters, digits, '-' or '_' (it names the game on the bus)")
     return Scenario(
-        name=c.text(head, "name", "scenario"),
+        name=name,
         source=source,
         map=game_map,
         game=game,
@@ -193,7 +196,7 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
         raise ScenarioError(f"{c.source}: {at} must be a table")
     c.only(raw, _AGENT_KEYS, at)
     agent_id = c.text(raw, "id", at)
-    if not agent_id.replace("-", "").replace("_", "").isalnum() or len(agent_id) > 64:
+    if not agent_id.replace("-", "").replace("_", "").isalnum() or not agent_id.isascii() or len(agent_id) > 64:
         raise ScenarioError(f"{c.source}: {at}.id {agent_id!r} must be letters, digits, '-' or '_'")
     team = c.choice(raw, "team", TEAMS[game], at)
     start = c.point(raw.get("start"), f"{at}.start")
@@ -218,8 +221,10 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
             c.fail(f"{at}.options.points must be a list of [east, north] points")
         options["points"] = [c.point(p, f"{at}.options.points[{j}]") for j, p in enumerate(points)]
         options["loop"] = c.boolean(options, "loop", f"{at}.options", default=False)
+    elif behaviour == "direct":
+        options = {k: c.number(options, k, f"{at}.options") for k in options}
     elif behaviour == "fake-out":
-        options = {k: c.number(options, k, f"{at}.options", positive=True) for k in options}
+        options = {k: c.number(options, k, f"{at}.options", positive=k != "margin") for k in options}
     return AgentSpec(
         id=agent_id,
         team=team,

@@ -44,6 +44,30 @@ def cache_root() -> Path:
     return Path(base) / "bearcat"
 
 
+def default_rules(
+    game_map: Map,
+    attacker_speed: float,
+    defender_speed: float,
+    *,
+    capture_radius: float | None = None,
+    capture_time: float | None = None,
+    return_time: float | None = None,
+) -> Rules:
+    """Rules with the defaults every entry point shares: a capture radius of
+    5% of the map's longer side, and stage times of 1.2 x that side over the
+    slower speed (time to cross the map with room to manoeuvre)."""
+    xmin, ymin, xmax, ymax = game_map.bounds
+    side = max(xmax - xmin, ymax - ymin)
+    horizon = 1.2 * side / min(attacker_speed, defender_speed)
+    return Rules(
+        attacker_speed=attacker_speed,
+        defender_speed=defender_speed,
+        capture_radius=0.05 * side if capture_radius is None else capture_radius,
+        capture_time=capture_time or horizon,
+        return_time=return_time or capture_time or horizon,
+    )
+
+
 @dataclass(frozen=True)
 class CtfGame:
     """One capture-the-flag game as a user names it."""

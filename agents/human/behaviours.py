@@ -9,7 +9,8 @@ direction (east, north) or None to stand still.
 - ``follow-guidance``: walk the displayed heading.
 - ``direct`` (unaided): an attacker goes for its goal along the shortest
   path; a defender places itself between the attacker and the return region,
-  at the first point of the attacker's straight run home it can reach first.
+  partway along the attacker's straight run there, and walks round the
+  regions it may not enter.
 - ``fake-out`` (thesis 3.5.1): while the display says the defender wins,
   move erratically away from the goal; once it shows the defender outside
   its winning region, follow the heading.
@@ -49,49 +50,97 @@ class Situation:
 
 
 class FollowGuidance:
+    """Walk the displayed heading, but not into a region one may not enter."""
+
     name = "follow-guidance"
 
     def decide(self, now: float, me: np.ndarray, screen: Screen, situation: Situation):
-        return screen.heading
+        return _around(me, screen.heading, situation.forbidden)
 
 
 class Direct:
+    """Unaided play. An attacker goes for its goal along the shortest path.
+    A defender marks the attacker as displayed, anticipating it: it takes
+    the attacker ``lead`` seconds ahead on its course (read from its last two
+    displayed positions) and keeps to the straight run from there to the
+    attacker's goal, ``standoff`` metres in front (or ``share`` of the way,
+    if that is nearer), walking round the regions it may not enter. It is
+    how a person blocks without a solver, and what a feint exploits: the
+    mark lags the display's age and the person's reaction, and a reversal
+    leaves it committed to the wrong side."""
+
     name = "direct"
+
+    def __init__(self, standoff: float = 6.0, share: float = 0.5, lead: float = 1.5) -> None:
+        self.standoff = standoff
+        self.share = share
+        self.lead = lead
+        self._seen: dict[str, tuple[float, np.ndarray]] = {}
+        self._course: dict[str, np.ndarray] = {}
 
     def decide(self, now, me, screen, situation):
         if situation.team in ("attacker", "evader"):
             return situation.navigator.toward(situation.goal, me)
-        target = _nearest_opponent(me, screen, situation)
-        if target is None:
+        attacker = _nearest_opponent(me, screen, situation)
+        if attacker is None:
             return None
-        return _toward(me, _blocking_point(me, target, situation))
+        a = attacker.position + self.lead * self._track(attacker, situation)
+        run = _nearest_point(situation.goal, a) - a
+        length = float(np.hypot(*run))
+        target = a if length < 1e-9 else a + min(self.standoff, self.share * length) * run / length
+        if np.hypot(*(target - me)) < 0.5:
+            return None
+        return _around(me, _toward(me, target), situation.forbidden)
+
+    def _track(self, attacker, situation) -> np.ndarray:
+        """The attacker's velocity from its last two displayed fixes (zero until known)."""
+        key = min(situation.opponents)
+        last = self._seen.get(key)
+        if last is None or attacker.t > last[0]:
+            if last is not None and attacker.t - last[0] < 5.0:
+                self._course[key] = (attacker.position - last[1]) / (attacker.t - last[0])
+            self._seen[key] = (attacker.t, attacker.position)
+        return self._course.get(key, np.zeros(2))
 
 
 class FakeOut:
-    """The attacker's fake-out; ``turn_every`` seconds between erratic turns
-    spread up to ``spread`` degrees either side of straight away from the goal."""
+    """The attacker's fake-out. While the display shows the defender in its
+    winning region, the attacker feints: it runs across the field, to one
+    side then the other, each leg ``turn_every`` seconds give or take half,
+    at ``spread`` degrees from the line to its goal give or take 30 (more
+    than 90: drifting back, less: pressing forward). Once the display shows
+    the defender outside its region, by at least ``margin`` metres of the
+    solver's value, it follows the heading home for good (``went_at``
+    records when)."""
 
     name = "fake-out"
 
-    def __init__(self, rng: np.random.Generator, turn_every: float = 1.5, spread: float = 60.0) -> None:
+    def __init__(
+        self, rng: np.random.Generator, turn_every: float = 1.5, spread: float = 100.0, margin: float = 0.0
+    ) -> None:
         self.rng = rng
+        self.margin = margin
         self.turn_every = turn_every
         self.spread = math.radians(spread)
         self._next_turn = -math.inf
+        self._side = 1.0 if rng.random() < 0.5 else -1.0
         self._offset = 0.0
-        self.faking = True
+        self.went_at: float | None = None
 
     def decide(self, now, me, screen, situation):
-        defender = _nearest_opponent(me, screen, situation)
-        self.faking = defender is not None and screen.region_of is not None and screen.in_region(defender)
-        if not self.faking:
+        if self.went_at is None:
+            defender = _nearest_opponent(me, screen, situation)
+            clear = screen.value is not None and screen.value <= -self.margin
+            if defender is not None and screen.region_of is not None and not screen.in_region(defender.position) and clear:
+                self.went_at = now
+        if self.went_at is not None:
             return screen.heading
         if now >= self._next_turn:
-            self._offset = self.rng.uniform(-self.spread, self.spread)
+            self._side = -self._side
+            self._offset = self._side * (self.spread + self.rng.uniform(-math.pi / 6, math.pi / 6))
             self._next_turn = now + self.turn_every * self.rng.uniform(0.5, 1.5)
-        away = me - _nearest_point(situation.goal, me)
-        base = math.atan2(away[0], away[1])
-        bearing = base + self._offset
+        home = _nearest_point(situation.goal, me) - me
+        bearing = math.atan2(home[0], home[1]) + self._offset
         return np.array([math.sin(bearing), math.cos(bearing)])
 
 
@@ -169,7 +218,7 @@ def make(name: str, options: dict, rng: np.random.Generator):
     if name == "follow-guidance":
         return FollowGuidance()
     if name == "direct":
-        return Direct()
+        return Direct(**options)
     if name == "fake-out":
         return FakeOut(rng, **options)
     if name == "go-no-go":
@@ -194,37 +243,23 @@ def _nearest_point(geometry, me) -> np.ndarray:
     return np.asarray(shapely.ops.nearest_points(geometry, shapely.Point(me))[0].coords[0])
 
 
-def _nearest_opponent(me, screen: Screen, situation: Situation) -> np.ndarray | None:
-    seen = [screen.reports[o].position for o in situation.opponents if o in screen.reports]
+def _nearest_opponent(me, screen: Screen, situation: Situation):
+    """The opponent's ``Sighting`` nearest ``me`` on the screen, None if none is shown."""
+    seen = [screen.reports[o] for o in situation.opponents if o in screen.reports]
     if not seen:
         return None
-    return min(seen, key=lambda q: float(np.hypot(*(q - me))))
+    return min(seen, key=lambda q: float(np.hypot(*(q.position - me))))
 
 
-def _blocking_point(me, attacker, situation: Situation) -> np.ndarray:
-    """The first point of the attacker's straight run to the return region that
-    the defender reaches no later than the attacker (both at equal speed: the
-    attacker's side of their bisector ends there), kept out of the forbidden
-    regions; the attacker's goal point if the whole run is the attacker's."""
-    goal = _nearest_point(situation.goal, attacker)
-    run = goal - attacker
-    length = math.hypot(run[0], run[1])
-    target = goal
-    if length > 1e-9:
-        u = run / length
-        # |d - (a + s u)| <= s  <=>  s >= |d - a|^2 / (2 u.(d - a)) when u.(d - a) > 0.
-        rel = me - attacker
-        along = float(u @ rel)
-        if along > 0:
-            s = float(rel @ rel) / (2 * along)
-            if s <= length:
-                target = attacker + s * u
-    forbidden = situation.forbidden
-    if forbidden is not None and forbidden.covers(shapely.Point(target)):
-        # Stop short of where the run enters the forbidden region.
-        inside = shapely.LineString([attacker, target]).intersection(forbidden)
-        entry = np.asarray(shapely.ops.nearest_points(inside, shapely.Point(attacker))[0].coords[0])
-        back = attacker - entry
-        n = math.hypot(back[0], back[1])
-        target = entry + (0.5 * back / n if n > 0.5 else back)
-    return target
+def _around(me, direction, forbidden) -> np.ndarray | None:
+    """``direction`` turned by the least angle that keeps the next few metres
+    out of ``forbidden`` (a defender walks round the regions it may not enter)."""
+    if direction is None or forbidden is None:
+        return direction
+    for turn in np.radians(np.arange(0, 181, 10)):
+        for sign in (1, -1):
+            c, s = math.cos(sign * turn), math.sin(sign * turn)
+            d = np.array([c * direction[0] - s * direction[1], s * direction[0] + c * direction[1]])
+            if not any(shapely.intersects_xy(forbidden, *(me + k * d)) for k in (0.5, 1.0, 2.0)):
+                return d
+    return None

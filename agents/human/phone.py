@@ -76,7 +76,7 @@ class Phone:
         self.compass = CompassTrack(compass, rng)
         self.screen = Screen()
         self.seq = 0
-        self.next_fix = 0.0
+        self.next_fix = float(rng.uniform(0.0, self.period))  # phones are not in step with each other
         self._buildings = shapely.union_all(game_map.obstacles) if game_map.obstacles else None
         if self._buildings is not None:
             shapely.prepare(self._buildings)

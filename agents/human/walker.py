@@ -7,7 +7,8 @@ few seconds' correlation: people drift off a displayed bearing and correct,
 they do not shake). Speed is the scenario's top speed times the terrain
 factor of the map where the person stands. Obstacles and the area's edge
 cannot be entered: a step that would end in one slides along whichever axis
-is still free, or is not taken.
+is still free, or is not taken; so is one into a region the rules forbid
+this person (a defender's flag and return regions).
 """
 
 from __future__ import annotations
@@ -34,6 +35,7 @@ class Walker:
         speed: float,
         reaction: float = 0.4,
         heading_error: float = 0.0,
+        keep_out=None,
         rng: np.random.Generator,
     ) -> None:
         self.map = game_map
@@ -45,7 +47,9 @@ class Walker:
         self.velocity = np.zeros(2)
         self._intents: deque[tuple[float, np.ndarray | None]] = deque([(-math.inf, None)])
         self._error = rng.normal(0.0, self.heading_sigma) if self.heading_sigma > 0 else 0.0
-        self._free = game_map.free_space
+        # Where the person may step: the free space, less any region the rules
+        # forbid them (they know better than to walk into it).
+        self._free = game_map.free_space if keep_out is None else game_map.free_space.difference(keep_out)
         shapely.prepare(self._free)
         self._zones = [(z.geometry, z.speed) for z in game_map.zones]
         for geometry, _ in self._zones:

@@ -17,8 +17,8 @@ from pathlib import Path
 
 from bearcat import arguments
 from maps import load_map
-from agents.ground_station.ctf_cache import CtfGame, Solved, cache_root, load_or_solve
-from solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES, Rules
+from agents.ground_station.ctf_cache import CtfGame, Solved, cache_root, default_rules, load_or_solve
+from solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
 from solvers.ctf_guidance import Guidance
 from solvers.ctf_playout import play
 from solvers.hji import SCHEMES
@@ -105,16 +105,10 @@ def _add_state_options(parser) -> None:
 
 def game_from_args(args) -> CtfGame:
     game_map = load_map(args.map)
-    xmin, ymin, xmax, ymax = game_map.bounds
-    side = max(xmax - xmin, ymax - ymin)
-    horizon = 1.2 * side / min(args.attacker_speed, args.defender_speed)
-    rules = Rules(
-        attacker_speed=args.attacker_speed,
-        defender_speed=args.defender_speed,
-        capture_radius=0.05 * side if args.capture_radius is None else args.capture_radius,
-        capture_time=args.capture_time or horizon,
-        return_time=args.return_time or args.capture_time or horizon,
-    )
+    rules = default_rules(
+        game_map, args.attacker_speed, args.defender_speed,
+        capture_radius=args.capture_radius, capture_time=args.capture_time, return_time=args.return_time,
+    )  # fmt: skip
     if args.grid < 9:
         raise arguments.UsageError(f"--grid {args.grid} is too coarse; use at least 9 points per axis")
     return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol)

@@ -1,0 +1,94 @@
+"""A person in the game: a walker carrying a phone and deciding by a behaviour.
+
+Each tick the body moves, its true position goes out on the truth key (for
+the referee and the recorder only), the phone sends a fix when one is due,
+and the behaviour reads the screen and sets where the body heads next (the
+body turns after its reaction delay). Guidance updates the screen; game
+state tells the phase (who holds the flag) and when the game is over.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from agents.human.behaviours import Situation
+from agents.human.phone import Phone
+from agents.human.walker import Walker
+from agents.protocol import Send
+from bus import keys
+from bus.messages import GameState, Guidance, Message, Truth
+
+TICK = 0.1  # s: the body's integration step and decision rate
+
+
+class HumanAgent:
+    role = "walker"
+    watches: tuple[str, ...] = ()
+    period = TICK
+
+    def __init__(
+        self,
+        game: str,
+        walker: Walker,
+        phone: Phone,
+        behaviour,
+        situation: Situation,
+        *,
+        goals: dict[str, object],
+        phase: str = "capture",
+    ) -> None:
+        self.game = game
+        self.name = situation.agent
+        self.walker = walker
+        self.phone = phone
+        self.behaviour = behaviour
+        self.situation = situation
+        self.goals = goals
+        self.phase = phase
+        self.ended = False
+        self.subscriptions = (keys.guidance(game, self.name), keys.state(game))
+        self._last: float | None = None
+
+    def start(self, now: float) -> list[Send]:
+        self._last = now
+        return self._report(now)
+
+    def handle(self, key: str, message: Message, now: float) -> list[Send]:
+        if isinstance(message, Guidance):
+            self.phone.show(message, now)
+        elif isinstance(message, GameState):
+            if message.phase == "ended":
+                self.ended = True
+                self.walker.intend(now, None)
+            phase = "capture" if message.flag_holder is None else "return"
+            if phase != self.phase and phase in self.goals:
+                self.phase = phase
+                self.situation = replace(self.situation, goal=self.goals[phase])
+        return []
+
+    def tick(self, now: float) -> list[Send]:
+        dt = now - (self._last if self._last is not None else now)
+        self._last = now
+        if dt > 0:
+            self.walker.step(now - dt, dt)
+        if not self.ended:
+            direction = self.behaviour.decide(now, self.walker.position.copy(), self.phone.screen, self.situation)
+            self.walker.intend(now, direction)
+        return self._report(now)
+
+    def peer(self, key: str, alive: bool, now: float) -> list[Send]:
+        return []
+
+    def _report(self, now: float) -> list[Send]:
+        position, heading = self.walker.position, self.walker.heading
+        lat, lon = self.walker.map.to_geodetic(position[0], position[1])
+        bearing = None if heading is None else math.degrees(heading) % 360.0
+        truth = Truth(agent=self.name, t=now, lat=lat, lon=lon, heading=bearing if bearing != 360.0 else 0.0)
+        out = [Send(keys.truth(self.game, self.name), truth)]
+        fix = self.phone.fix(now, np.array(position), heading)
+        if fix is not None:
+            out.append(Send(keys.fix(self.game, self.name), fix))
+        return out

@@ -1,0 +1,188 @@
+"""The simulation runtime: every peer in one process, in virtual time.
+
+A simpy environment drives the agents (each ticks at its own period from
+t = 0) over the in-process bus. Every message is encoded by its sender and
+decoded by each receiver, as on Zenoh, and crosses the netem shim of its
+directed link, which decides when (and whether, and how often) it arrives;
+arrivals are scheduled in virtual time. The launcher's part is played here
+too: liveliness tokens for every peer, the start command at t = 0, and the
+end when the referee says the game is over. For a seed the run is
+deterministic, down to every line of its event log.
+"""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import shapely
+import simpy
+
+from agents.ground_station.recorder import EventLog
+from bus import keys
+from bus.codec import Inbox, encode
+from bus.inprocess import InProcessBus
+from bus.messages import Control, GameState
+from netem.profiles import load_profile
+from netem.shim import Shim
+from scenarios.cast import cast
+from scenarios.schema import Scenario
+
+log = logging.getLogger(__name__)
+
+LAUNCHER = "launcher"
+GRACE = 5.0  # s of game time past the limit before a run that never ended is cut
+POLL = 0.1  # s between releases of messages held in dead zones
+
+
+@dataclass
+class Outcome:
+    """How a run ended: ``winner`` (a team, None if nobody won), ``reason``,
+    ``elapsed`` seconds of game time, the final ``state`` and message counts."""
+
+    scenario: str
+    seed: int
+    netem: str
+    winner: str | None
+    reason: str
+    elapsed: float
+    ended: bool
+    flag_holder: str | None = None
+    captured: list[str] = field(default_factory=list)
+    counts: dict[str, int] = field(default_factory=dict)
+    drops: dict[str, dict[str, int]] = field(default_factory=dict)
+    notes: dict = field(default_factory=dict)
+
+
+def simulate(
+    scenario: Scenario,
+    *,
+    seed: int | None = None,
+    netem: str | None = None,
+    events: str | Path | None = None,
+    ctf_progress=None,
+) -> Outcome:
+    """Play ``scenario`` once; ``events`` is the path of the event log to write."""
+    seed = scenario.seed if seed is None else int(seed)
+    profile = load_profile(netem or scenario.netem)
+    players = cast(scenario, profile, seed, ctf_progress=ctf_progress)
+    env = simpy.Environment()
+    record = EventLog(events)
+    zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
+
+    def where(peer: str):
+        person = players.people.get(peer)
+        return None if person is None else tuple(person.walker.position)
+
+    ground = (players.referee.name, players.guidance.name, LAUNCHER)
+    shim = Shim(
+        profile.link, seed, dead_zones=zones, where=where if zones is not None else None, record=record.impaired,
+        colocated=ground,
+    )  # fmt: skip
+
+    def arrive(call, payload):
+        return lambda _event: call(payload)
+
+    def deliver(sender, receiver, key, payload, call):
+        if payload is None:  # liveliness
+            call(None)
+            return
+        for d in shim.transmit(sender, receiver, key, payload, env.now, token=call):
+            env.timeout(max(d.at - env.now, 0.0)).callbacks.append(arrive(call, d.payload))
+
+    bus = InProcessBus(deliver)
+    inboxes = {}
+    final: dict = {}
+
+    def send(session, sends):
+        for s in sends:
+            record.sent(env.now, session.name, s.key, s.message)
+            session.put(s.key, encode(s.message), reliable=keys.reliable(s.key))
+
+    def receiver(agent, session, inbox):
+        def on(key, payload, sender):
+            message = inbox.accept(key, payload)
+            if message is None:
+                record.refused(env.now, sender, agent.name, key, "undecodable or wrong for its key")
+                return
+            record.received(env.now, sender, agent.name, key, getattr(message, "seq", None))
+            send(session, agent.handle(key, message, env.now))
+
+        return on
+
+    def watcher(agent, session):
+        return lambda key, alive: send(session, agent.peer(key, alive, env.now))
+
+    sessions = []
+    for agent in players.agents:
+        session = bus.session(agent.name)
+        inbox = inboxes[agent.name] = Inbox(agent.name)
+        for expr in agent.subscriptions:
+            session.subscribe(expr, receiver(agent, session, inbox))
+        for expr in agent.watches:
+            session.subscribe_liveliness(expr, watcher(agent, session))
+        sessions.append((agent, session))
+    for agent, session in sessions:
+        session.declare_token(keys.alive(scenario.name, agent.role, agent.name))
+
+    launcher = bus.session(LAUNCHER)
+    launcher_inbox = Inbox(LAUNCHER)
+    done = env.event()
+
+    def on_state(key, payload, sender):
+        state = launcher_inbox.accept(key, payload)
+        if isinstance(state, GameState) and state.phase == "ended" and not done.triggered:
+            final["state"] = state
+            done.succeed()
+
+    launcher.subscribe(keys.state(scenario.name), on_state)
+
+    def ticker(agent, session):
+        send(session, agent.start(env.now))
+        while True:
+            yield env.timeout(agent.period)
+            send(session, agent.tick(env.now))
+
+    def poller():
+        while True:
+            yield env.timeout(POLL)
+            for call, d in shim.poll(env.now):
+                env.timeout(max(d.at - env.now, 0.0)).callbacks.append(arrive(call, d.payload))
+
+    for agent, session in sessions:
+        env.process(ticker(agent, session))
+    if zones is not None:
+        env.process(poller())
+    start = Control(t=0.0, command="start")
+    record.sent(0.0, LAUNCHER, keys.control(scenario.name), start)
+    launcher.put(keys.control(scenario.name), encode(start))
+    env.run(until=env.any_of([done, env.timeout(scenario.time_limit + GRACE)]))
+
+    state = final.get("state")
+    outcome = Outcome(
+        scenario=scenario.name, seed=seed, netem=profile.name,
+        winner=state.winner if state else None,
+        reason=state.reason if state else f"no result within {scenario.time_limit + GRACE:g} s of game time",
+        elapsed=state.elapsed if state else env.now, ended=state is not None,
+        flag_holder=state.flag_holder if state else None, captured=list(state.captured) if state else [],
+        counts=dict(sorted(record.counts.items())),
+        drops={name: dict(inbox.drops) for name, inbox in inboxes.items() if inbox.dropped},
+        notes=_notes(players),
+    )  # fmt: skip
+    record.note(env.now, "outcome", **{k: v for k, v in vars(outcome).items() if k != "counts"})
+    record.close()
+    for _, session in sessions:
+        session.close()
+    return outcome
+
+
+def _notes(players) -> dict:
+    """What the behaviours decided that a study needs (a go-no-go commit time, a fake-out's last state)."""
+    notes = {}
+    for name, person in players.people.items():
+        b = person.behaviour
+        for attribute in ("committed_at", "went_at"):
+            if getattr(b, attribute, None) is not None:
+                notes[f"{name}.{attribute}"] = getattr(b, attribute)
+    return notes
