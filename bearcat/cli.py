@@ -15,16 +15,18 @@ from bearcat import __version__
 from bearcat.arguments import UsageError
 from bearcat.commands import ctf as ctf_command
 from bearcat.commands import experiment as experiment_command
+from bearcat.commands import live as live_command
 from bearcat.commands import maps as maps_command
 from bearcat.commands import simulate as simulate_command
 from bearcat.commands import solve as solve_command
+from bus.errors import BusError
 from maps.errors import MapError
 from netem.profiles import ProfileError
 from scenarios.schema import ScenarioError
 from solvers.errors import InputError
 
 USER_ERRORS = (
-    UsageError, MapError, InputError, ScenarioError, ProfileError, FileNotFoundError, IsADirectoryError, PermissionError,
+    UsageError, MapError, InputError, ScenarioError, ProfileError, BusError, FileNotFoundError, IsADirectoryError, PermissionError,
 )  # fmt: skip
 
 
@@ -36,7 +38,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"bearcat {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log more (repeat for debug)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for module in (maps_command, solve_command, ctf_command, experiment_command, simulate_command):
+    for module in (maps_command, solve_command, ctf_command, experiment_command, simulate_command, live_command):
         module.register(subparsers)
     return parser
 

@@ -36,55 +36,78 @@ def stream(seed: int, agent: str, purpose: str) -> np.random.Generator:
 
 @dataclass
 class Cast:
-    referee: Referee
-    guidance: object
+    """Who plays a scenario: the ground station's ``referee`` and
+    ``guidance`` (None in a cast of people only) and the ``people``."""
+
     people: dict[str, HumanAgent]
-    contest: Contest
+    referee: Referee | None = None
+    guidance: object | None = None
 
     @property
     def agents(self) -> list:
         """In the order the runtimes start and tick them."""
-        return [self.referee, self.guidance, *self.people.values()]
+        return [a for a in (self.referee, self.guidance) if a is not None] + list(self.people.values())
 
 
-def cast(scenario: Scenario, profile: Profile, seed: int, *, ctf_progress=None) -> Cast:
+def cast(scenario: Scenario, profile: Profile, seed: int, *, people=None, ground: bool = True, ctf_progress=None) -> Cast:
+    """The agents of ``scenario``: the people named in ``people`` (default all)
+    and, with ``ground``, the ground station's referee and guidance service."""
     if scenario.game != "ctf":
         raise ScenarioError(f"{scenario.source}: running {scenario.game} games is not supported yet; ctf is")
-    return _ctf(scenario, profile, seed, ctf_progress)
+    game = _CtfGame(scenario)
+    chosen = scenario.ids if people is None else list(people)
+    crowd = {a: game.person(scenario.agent(a), profile, seed) for a in chosen}
+    if not ground:
+        return Cast(crowd)
+    return Cast(crowd, game.referee(), game.guidance(ctf_progress))
 
 
-def _ctf(scenario: Scenario, profile: Profile, seed: int, progress) -> Cast:
-    attackers, defenders = scenario.team("attacker"), scenario.team("defender")
-    if len(attackers) != 1 or len(defenders) != 1:
-        raise ScenarioError(f"{scenario.source}: capture-the-flag is 1 vs 1: one attacker and one defender")
-    attacker, defender = attackers[0], defenders[0]
-    game_map, r = scenario.map, scenario.rules
-    rules = default_rules(
-        game_map, attacker.speed, defender.speed,
-        capture_radius=r["capture_radius"], capture_time=r["capture_time"], return_time=r["return_time"],
-    )  # fmt: skip
-    solved = load_or_solve(CtfGame(game_map, r["grid"], rules), r["stages"], progress=progress)
-    flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
-    home = shapely.union_all([g.geometry for g in game_map.regions_with_role("return")])
-    flag_taken = r["stages"] == "return"
-    contest = Contest(
-        runners=(attacker.id,), chasers=(defender.id,), capture_radius=rules.capture_radius,
-        time_limit=scenario.time_limit, teams=("attacker", "defender"),
-        targets=(("home", home),) if flag_taken else (("flag", flag), ("home", home)),
-        forbidden=(("flag", flag), ("return", home)), flag_taken=flag_taken,
-    )  # fmt: skip
-    phase = "return" if flag_taken else "capture"
-    guidance = CtfGuidanceService(
-        scenario.name, game_map, CtfGuidance(solved.solution), attacker=attacker.id, defender=defender.id,
-        aided={a.id: a.aided for a in scenario.agents}, rate=scenario.guidance_rate, phase=phase,
-    )  # fmt: skip
-    navigator = Navigator(game_map)
-    goals = {"capture": flag, "return": home}
-    people = {}
-    for spec, opponent, forbidden in ((attacker, defender, None), (defender, attacker, flag.union(home))):
-        situation = behaviours.Situation(spec.id, spec.team, (opponent.id,), goals[phase], forbidden, navigator)
-        people[spec.id] = _person(scenario, spec, profile, seed, situation, goals, phase, keep_out=forbidden)
-    return Cast(Referee(scenario.name, game_map, contest), guidance, people, contest)
+class _CtfGame:
+    """Capture-the-flag as the scenario sets it up (thesis 3.1.1, 3.5)."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        attackers, defenders = scenario.team("attacker"), scenario.team("defender")
+        if len(attackers) != 1 or len(defenders) != 1:
+            raise ScenarioError(f"{scenario.source}: capture-the-flag is 1 vs 1: one attacker and one defender")
+        self.scenario = scenario
+        self.attacker, self.defender = attackers[0], defenders[0]
+        game_map, r = scenario.map, scenario.rules
+        self.rules = default_rules(
+            game_map, self.attacker.speed, self.defender.speed,
+            capture_radius=r["capture_radius"], capture_time=r["capture_time"], return_time=r["return_time"],
+        )  # fmt: skip
+        self.flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
+        self.home = shapely.union_all([g.geometry for g in game_map.regions_with_role("return")])
+        self.flag_taken = r["stages"] == "return"
+        self.phase = "return" if self.flag_taken else "capture"
+        self.goals = {"capture": self.flag, "return": self.home}
+        self._navigator = None
+
+    def referee(self) -> Referee:
+        contest = Contest(
+            runners=(self.attacker.id,), chasers=(self.defender.id,), capture_radius=self.rules.capture_radius,
+            time_limit=self.scenario.time_limit, teams=("attacker", "defender"),
+            targets=(("home", self.home),) if self.flag_taken else (("flag", self.flag), ("home", self.home)),
+            forbidden=(("flag", self.flag), ("return", self.home)), flag_taken=self.flag_taken,
+        )  # fmt: skip
+        return Referee(self.scenario.name, self.scenario.map, contest)
+
+    def guidance(self, progress=None) -> CtfGuidanceService:
+        s = self.scenario
+        solved = load_or_solve(CtfGame(s.map, s.rules["grid"], self.rules), s.rules["stages"], progress=progress)
+        return CtfGuidanceService(
+            s.name, s.map, CtfGuidance(solved.solution), attacker=self.attacker.id, defender=self.defender.id,
+            aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate, phase=self.phase,
+        )  # fmt: skip
+
+    def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
+        if self._navigator is None:
+            self._navigator = Navigator(self.scenario.map)
+        attacking = spec.team == "attacker"
+        opponent = self.defender if attacking else self.attacker
+        forbidden = None if attacking else self.flag.union(self.home)
+        situation = behaviours.Situation(spec.id, spec.team, (opponent.id,), self.goals[self.phase], forbidden, self._navigator)
+        return _person(self.scenario, spec, profile, seed, situation, self.goals, self.phase, keep_out=forbidden)
 
 
 def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None) -> HumanAgent:

@@ -3,8 +3,9 @@
 Each tick the body moves, its true position goes out on the truth key (for
 the referee and the recorder only), the phone sends a fix when one is due,
 and the behaviour reads the screen and sets where the body heads next (the
-body turns after its reaction delay). Guidance updates the screen; game
-state tells the phase (who holds the flag) and when the game is over.
+body turns after its reaction delay). Nobody moves before the start
+command. Guidance updates the screen; game state tells the phase (who holds
+the flag) and when the game is over.
 """
 
 from __future__ import annotations
@@ -19,7 +20,7 @@ from agents.human.phone import Phone
 from agents.human.walker import Walker
 from agents.protocol import Send
 from bus import keys
-from bus.messages import GameState, Guidance, Message, Truth
+from bus.messages import Control, GameState, Guidance, Message, Truth
 
 TICK = 0.1  # s: the body's integration step and decision rate
 
@@ -48,8 +49,9 @@ class HumanAgent:
         self.situation = situation
         self.goals = goals
         self.phase = phase
+        self.started = False
         self.ended = False
-        self.subscriptions = (keys.guidance(game, self.name), keys.state(game))
+        self.subscriptions = (keys.guidance(game, self.name), keys.state(game), keys.control(game))
         self._last: float | None = None
 
     def start(self, now: float) -> list[Send]:
@@ -59,7 +61,10 @@ class HumanAgent:
     def handle(self, key: str, message: Message, now: float) -> list[Send]:
         if isinstance(message, Guidance):
             self.phone.show(message, now)
+        elif isinstance(message, Control):
+            self.started = self.started or message.command in ("start", "resume")
         elif isinstance(message, GameState):
+            self.started = self.started or message.phase == "running"
             if message.phase == "ended":
                 self.ended = True
                 self.walker.intend(now, None)
@@ -74,7 +79,7 @@ class HumanAgent:
         self._last = now
         if dt > 0:
             self.walker.step(now - dt, dt)
-        if not self.ended:
+        if self.started and not self.ended:
             direction = self.behaviour.decide(now, self.walker.position.copy(), self.phone.screen, self.situation)
             self.walker.intend(now, direction)
         return self._report(now)

@@ -1,0 +1,93 @@
+"""``bearcat run`` and ``bearcat peer``: live runs, every peer its own process over Zenoh."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from scenarios.schema import load_scenario
+
+
+def register(subparsers) -> None:
+    run = subparsers.add_parser(
+        "run",
+        help="play a scenario live: every peer its own process over Zenoh",
+        description="Start the ground station and one walker peer per agent as processes on this host, wait "
+        "for all of them, start the game, and stop every peer when it ends (or on Ctrl-C, or when a peer dies).",
+    )
+    run.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
+    run.add_argument("--out", type=Path, metavar="DIR", help="run directory (default ./runs/SCENARIO-SEED)")
+    run.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
+    run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    run.set_defaults(run=run_live)
+
+    peer = subparsers.add_parser(
+        "peer",
+        help="start one peer by hand (a person at a keyboard, or against real hardware)",
+        description="Start one peer of a scenario: the ground station (referee and guidance) or one walker.",
+    )
+    peer.add_argument("role", choices=("ground-station", "walker"))
+    peer.add_argument("--scenario", required=True, metavar="SCENARIO", help="built-in scenario name or TOML file")
+    peer.add_argument("--id", default="gs", metavar="ID", help="the walker's agent id (ignored for the ground station)")
+    peer.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                      help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
+    peer.add_argument("--listen", action="append", metavar="ENDPOINT",
+                      help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0)")
+    peer.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
+    peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
+    peer.set_defaults(run=run_peer)
+
+
+def run_live(args) -> int:
+    from scenarios.cast import cast
+    from scenarios.launch import launch
+    from netem.profiles import load_profile
+
+    scenario = load_scenario(args.scenario)
+    seed = scenario.seed if args.seed is None else args.seed
+    netem = args.netem or scenario.netem
+    load_profile(netem)
+    out = args.out or Path("runs") / f"{scenario.name}-{seed}"
+    # Solve (or load) what the ground station needs here, with progress, so no peer waits on it.
+    cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=_progress())
+    outcome = launch(scenario, _reference(args.scenario), out, seed=seed, netem=netem,
+                     say=lambda text: print(text, flush=True))  # fmt: skip
+    who = f"{outcome.winner} wins" if outcome.winner else "no winner"
+    print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
+    print(f"run directory: {out} (events.jsonl, outcome.json, peers/)")
+    return 0 if outcome.ended else 1
+
+
+def run_peer(args) -> int:
+    from scenarios.live import start_peer
+
+    scenario = load_scenario(args.scenario)
+    reason = start_peer(
+        args.role, scenario, args.id, connect=args.connect, listen=args.listen,
+        seed=scenario.seed if args.seed is None else args.seed, netem=args.netem or scenario.netem, out=args.out,
+    )  # fmt: skip
+    print(f"peer {args.id if args.role == 'walker' else 'gs'}: {reason}", flush=True)
+    return 0
+
+
+def _reference(text: str) -> str:
+    """How child processes find the scenario: built-in names as they are, files by absolute path."""
+    path = Path(text)
+    return str(path.resolve()) if path.exists() else text
+
+
+def _progress():
+    from tqdm import tqdm
+
+    bars: dict = {}
+
+    def update(name, t, horizon, change):
+        bar = bars.get(name)
+        if bar is None:
+            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"solving {name} set", unit="s", file=sys.stderr)
+        bar.update(round(t - bar.n, 2))
+        if t >= horizon:
+            bar.close()
+
+    return update

@@ -1,0 +1,197 @@
+"""Launching a live run: every peer its own process over Zenoh on this host.
+
+The launcher solves what the ground station will need first (so no peer
+starts against an empty cache), listens on a free loopback port that every
+peer connects to, starts the ground station and one walker per agent, waits
+until every peer's liveliness token is up, sends the start command and
+supervises: the run ends when the referee says so, when a peer process dies
+(the referee sees its token vanish and ends the game; the launcher ends the
+run itself if the ground station is the one that died), at the time limit,
+or on Ctrl-C. In every case the launcher then stops every peer it started
+(a stop command, then SIGTERM, then SIGKILL) and leaves no process behind.
+Agents driven from a keyboard are not started here: the launcher prints the
+``bearcat peer`` command for a person to run in a terminal, and waits.
+
+The launcher's own session records every message of the game it sees into
+``events.jsonl``; each peer writes what its network shim did to the messages
+it received into ``peers/NAME.jsonl`` and its log into ``peers/NAME.log``.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import subprocess
+import sys
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from agents.ground_station.recorder import EventLog
+from bus import keys
+from bus.codec import Inbox, encode
+from bus.messages import Control, GameState
+from bus.zenoh_session import ZenohSession, config
+from scenarios.schema import Scenario
+
+log = logging.getLogger(__name__)
+
+GROUND = "gs"
+STARTUP = 60.0  # s for every peer to come up
+GRACE = 5.0  # s past the time limit before the launcher stops a game itself
+STOP_WAIT = 5.0  # s a peer gets to exit after the stop command, and again after SIGTERM
+
+
+@dataclass
+class LiveOutcome:
+    scenario: str
+    winner: str | None
+    reason: str
+    elapsed: float
+    ended: bool
+    peers: dict[str, int | None] = field(default_factory=dict)  # exit codes
+    out: str = ""
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def peer_command(role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path) -> list[str]:
+    return [
+        sys.executable, "-m", "bearcat", "peer", role, "--scenario", scenario_ref, "--id", agent,
+        "--connect", endpoint, "--seed", str(seed), "--netem", netem, "--out", str(out),
+    ]  # fmt: skip
+
+
+def launch(
+    scenario: Scenario, scenario_ref: str, out: Path, *, seed: int, netem: str, say=print, startup: float = STARTUP
+) -> LiveOutcome:
+    """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path)."""
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "peers").mkdir(exist_ok=True)
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    session = ZenohSession("launcher", config(listen=[endpoint]))
+    record = EventLog(out / "events.jsonl")
+    inbox = Inbox("launcher")
+    final: dict = {}
+    alive: set[str] = set()
+    lock = threading.Lock()
+    game = scenario.name
+
+    def seen(key, payload, sender):
+        message = inbox.accept(key, payload)
+        with lock:
+            if message is None:
+                record.refused(time.time(), sender, "launcher", key, "undecodable or wrong for its key")
+                return
+            record.sent(time.time(), sender, key, message)
+            if isinstance(message, GameState) and message.phase == "ended" and "state" not in final:
+                final["state"] = message
+
+    def liveliness(key, up):
+        with lock:
+            (alive.add if up else alive.discard)(key)
+            record.note(time.time(), "alive" if up else "gone", key=key)
+
+    session.subscribe(keys.game_wide(game), seen)
+    session.subscribe_liveliness(keys.every(game, "alive"), liveliness)
+
+    keyboard = [a.id for a in scenario.agents if a.behaviour == "keyboard"]
+    expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
+    expected |= {keys.alive(game, "walker", a.id) for a in scenario.agents}
+    children: dict[str, subprocess.Popen] = {}
+    started_at = None
+    reason = None
+    try:
+        roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
+        for role, name in roles:
+            logfile = open(out / "peers" / f"{name}.log", "w")
+            children[name] = subprocess.Popen(
+                peer_command(role, scenario_ref, name, endpoint, seed, netem, out),
+                stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+        for name in keyboard:
+            say(f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
+                + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out)))  # fmt: skip
+        deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
+        while True:
+            with lock:
+                missing = sorted(expected - alive)
+            if not missing:
+                break
+            dead = [n for n, p in children.items() if p.poll() is not None]
+            if dead:
+                reason = f"peer {dead[0]} exited with code {children[dead[0]].returncode} before the start"
+                break
+            if time.monotonic() > deadline:
+                reason = f"peers not up after {startup:g} s: {', '.join(k.rsplit('/', 1)[-1] for k in missing)}"
+                break
+            time.sleep(0.05)
+        if reason is None:
+            start = Control(t=time.time(), command="start")
+            session.put(keys.control(game), encode(start))
+            started_at = time.monotonic()
+            say(f"{game}: {len(expected)} peers up; game started")
+            reason = _supervise(children, final, lock, started_at, scenario.time_limit + GRACE)
+    except KeyboardInterrupt:
+        reason = "interrupted"
+    finally:
+        codes = _stop_all(session, game, children, final, lock, reason)
+        state = final.get("state")
+        outcome = LiveOutcome(
+            scenario=game, winner=state.winner if state else None,
+            reason=state.reason if state else (reason or "stopped"),
+            elapsed=state.elapsed if state else (0.0 if started_at is None else time.monotonic() - started_at),
+            ended=state is not None, peers=codes, out=str(out),
+        )  # fmt: skip
+        record.note(time.time(), "outcome", **vars(outcome))
+        record.close()
+        session.close()
+        (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
+    return outcome
+
+
+def _supervise(children, final, lock, started_at: float, limit: float) -> str | None:
+    """Wait for the end of the game; why the launcher had to end it, if it did."""
+    gone_since = None
+    while True:
+        with lock:
+            if "state" in final:
+                return None
+        dead = [n for n, p in children.items() if p.poll() is not None]
+        if dead:
+            if GROUND in dead:
+                return f"the ground station exited with code {children[GROUND].returncode}"
+            # The referee sees a walker's token vanish and ends the game; give it a moment.
+            gone_since = gone_since or time.monotonic()
+            if time.monotonic() - gone_since > 3.0:
+                return f"peer {dead[0]} exited with code {children[dead[0]].returncode}"
+        if time.monotonic() - started_at > limit:
+            return f"no result within {limit:g} s"
+        time.sleep(0.05)
+
+
+def _stop_all(session, game: str, children, final, lock, reason) -> dict[str, int | None]:
+    with lock:
+        ended = "state" in final
+    if not ended and children:
+        try:
+            session.put(keys.control(game), encode(Control(t=time.time(), command="stop", reason=(reason or "")[:200])))
+        except Exception:  # noqa: BLE001 - stopping must go on whatever the bus does
+            log.exception("could not send the stop command")
+    for signal_name in ("wait", "terminate", "kill"):
+        deadline = time.monotonic() + STOP_WAIT
+        for p in children.values():
+            if p.poll() is None and signal_name != "wait":
+                getattr(p, signal_name)()
+        while time.monotonic() < deadline and any(p.poll() is None for p in children.values()):
+            time.sleep(0.05)
+        if all(p.poll() is not None for p in children.values()):
+            break
+    return {name: p.poll() for name, p in children.items()}

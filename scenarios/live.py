@@ -1,0 +1,200 @@
+"""The live runtime: one peer process, its agents driven by the wall clock
+over Zenoh.
+
+Zenoh's callbacks run on its own threads; they only hand each sample to the
+asyncio loop, where the receiving end's netem shim decides when it arrives
+and the agent handles it. Each agent ticks at its period on the wall clock
+(without drift: the next tick is scheduled from the last one's due time,
+not from when it ran). A liveliness token announces each agent. The peer
+ends a second after it sees the game end (so its last messages get out),
+on a stop from the launcher, or on SIGINT/SIGTERM, and closes its session
+in every case.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import logging
+import signal
+
+from agents.ground_station.recorder import EventLog
+from bus import keys
+from bus.clock import WallClock
+from bus.codec import Inbox, encode
+from bus.messages import Control, GameState
+from netem.shim import Shim
+
+log = logging.getLogger(__name__)
+
+LINGER = 1.0  # s a peer stays up after the game ended
+POLL = 0.1
+
+
+async def run_peer(agents, session, game: str, *, shim: Shim | None = None, record: EventLog | None = None) -> str:
+    """Drive ``agents`` on ``session`` until the game ends; why it stopped."""
+    loop = asyncio.get_running_loop()
+    clock = WallClock()
+    record = record or EventLog(None)
+    finished = asyncio.Event()
+    why = {"reason": "stopped"}
+
+    def publish(sends) -> None:
+        for s in sends:
+            record.sent(clock.now(), session.name, s.key, s.message)
+            session.put(s.key, encode(s.message), reliable=keys.reliable(s.key))
+
+    def handler(agent, inbox):
+        def handle(key, payload, sender):
+            message = inbox.accept(key, payload)
+            if message is None:
+                record.refused(clock.now(), sender, agent.name, key, "undecodable or wrong for its key")
+                return
+            record.received(clock.now(), sender, agent.name, key, getattr(message, "seq", None))
+            try:
+                publish(agent.handle(key, message, clock.now()))
+            except Exception:  # noqa: BLE001 - a message must never take the peer down
+                log.exception("%s failed on a message on %s", agent.name, key)
+            if isinstance(message, GameState) and message.phase == "ended" and not finished.is_set():
+                why["reason"] = f"game ended: {message.reason}"
+                loop.call_later(LINGER, finished.set)
+            if isinstance(message, Control) and message.command == "stop":
+                why["reason"] = f"stopped by the launcher: {message.reason}"
+                loop.call_later(LINGER, finished.set)
+
+        def arrived(key, payload, sender):
+            now = clock.now()
+            if shim is None:
+                handle(key, payload, sender)
+                return
+            for d in shim.transmit(sender, agent.name, key, payload, now, token=(agent.name, key, sender)):
+                loop.call_later(max(d.at - now, 0.0), handle, key, d.payload, sender)
+
+        return handle, arrived
+
+    handles = {}
+    for agent in agents:
+        handle, arrived = handler(agent, Inbox(agent.name))
+        handles[agent.name] = handle
+        for expr in agent.subscriptions:
+            session.subscribe(expr, lambda k, p, s, arrived=arrived: loop.call_soon_threadsafe(arrived, k, p, s))
+        for expr in agent.watches:
+            session.subscribe_liveliness(
+                expr, lambda k, alive, a=agent: loop.call_soon_threadsafe(lambda: publish(a.peer(k, alive, clock.now())))
+            )
+    for agent in agents:
+        session.declare_token(keys.alive(game, agent.role, agent.name))
+
+    async def ticker(agent):
+        publish(agent.start(clock.now()))
+        due = loop.time()
+        while True:
+            due += agent.period
+            await asyncio.sleep(max(due - loop.time(), 0.0))
+            try:
+                publish(agent.tick(clock.now()))
+            except Exception:  # noqa: BLE001
+                log.exception("%s failed on a tick", agent.name)
+
+    async def poller():
+        while True:
+            await asyncio.sleep(POLL)
+            now = clock.now()
+            for (receiver, key, sender), d in shim.poll(now):
+                loop.call_later(max(d.at - now, 0.0), handles[receiver], key, d.payload, sender)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, lambda: (why.update(reason="interrupted"), finished.set()))
+        except (NotImplementedError, RuntimeError):  # not the main thread
+            pass
+    tasks = [asyncio.create_task(ticker(a)) for a in agents]
+    if shim is not None and shim.dead_zones is not None:
+        tasks.append(asyncio.create_task(poller()))
+    try:
+        await finished.wait()
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        session.close()
+        record.close()
+    return why["reason"]
+
+
+def start_peer(role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None) -> str:
+    """Build this peer's agents and run them until the game ends (``bearcat peer``)."""
+    import shapely
+
+    from bus.errors import BusError
+    from bus.zenoh_session import ZenohSession, config
+    from netem.profiles import load_profile
+    from scenarios.cast import cast
+    from scenarios.schema import ScenarioError
+
+    profile = load_profile(netem)
+    if role == "ground-station":
+        players = cast(scenario, profile, seed, people=[], ground=True)
+        agents, name = [players.referee, players.guidance], players.guidance.name
+    elif role == "walker":
+        if agent not in scenario.ids:
+            raise ScenarioError(f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}")
+        players = cast(scenario, profile, seed, people=[agent], ground=False)
+        agents, name = [players.people[agent]], agent
+    else:
+        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station or walker")
+    record = EventLog(None if out is None else f"{out}/peers/{name}.jsonl")
+    zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
+    positions: dict[str, tuple[float, float]] = {}
+    session = ZenohSession(name, config(listen=listen, connect=connect))
+    if zones is not None:
+        # Dead zones need every peer's position: in simulation the truth tells it.
+        def on_truth(key, payload, sender):
+            message = Inbox(name).accept(key, payload)
+            if message is not None:
+                positions[message.agent] = scenario.map.to_local(message.lat, message.lon)
+
+        session.subscribe(keys.every(scenario.name, "truth"), on_truth)
+    shim = Shim(
+        profile.link, seed, dead_zones=zones, where=positions.get if zones is not None else None,
+        record=record.impaired, colocated=(GROUND_PEERS),
+    )  # fmt: skip
+    keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
+    if keyboard:
+        _read_keys(keyboard[0].behaviour)
+    return asyncio.run(run_peer(agents, session, scenario.name, shim=shim, record=record))
+
+
+GROUND_PEERS = ("gs", "referee", "launcher")
+
+
+def _read_keys(behaviour) -> None:
+    """Feed arrow keys and WASD from this terminal to a keyboard behaviour, on a thread."""
+    import sys
+    import termios
+    import threading
+    import tty
+
+    from scenarios.schema import ScenarioError
+
+    if not sys.stdin.isatty():
+        raise ScenarioError("the keyboard behaviour needs a terminal: start this peer from one")
+    arrows = {"A": "up", "B": "down", "C": "right", "D": "left"}
+    fd = sys.stdin.fileno()
+    saved = termios.tcgetattr(fd)
+
+    def read():
+        tty.setcbreak(fd)
+        try:
+            while True:
+                ch = sys.stdin.read(1)
+                if ch == "\x1b" and sys.stdin.read(1) == "[":
+                    ch = arrows.get(sys.stdin.read(1), "")
+                elif ch == " ":
+                    ch = "space"
+                if ch in ("q", "\x03", ""):
+                    break
+                behaviour.press(ch.lower())
+        finally:
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+    threading.Thread(target=read, daemon=True, name="keys").start()
