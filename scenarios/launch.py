@@ -30,6 +30,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from agents.ground_station.recorder import EventLog
+from agents.ground_station.recording import finish_run
 from bus import keys
 from bus.codec import Inbox, encode
 from bus.messages import Control, GameState
@@ -77,6 +78,8 @@ def launch(
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     session = ZenohSession("launcher", config(listen=[endpoint]))
+    # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
+    (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
     record = EventLog(out / "events.jsonl")
     inbox = Inbox("launcher")
     final: dict = {}
@@ -154,6 +157,7 @@ def launch(
         record.close()
         session.close()
         (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
+        finish_run(out, scenario.map, game)
     return outcome
 
 

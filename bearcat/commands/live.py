@@ -19,7 +19,19 @@ def register(subparsers) -> None:
     run.add_argument("--out", type=Path, metavar="DIR", help="run directory (default ./runs/SCENARIO-SEED)")
     run.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
     run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
+    run.add_argument("--headless", action="store_true", help="no viewer (the default)")
     run.set_defaults(run=run_live)
+
+    view = subparsers.add_parser(
+        "view",
+        help="replay a run's Rerun recording",
+        description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing).",
+    )
+    view.add_argument("run_dir", metavar="RUN", type=Path, help="a run directory (bearcat run --out, bearcat simulate --out)")
+    view.add_argument("--screenshot", type=Path, metavar="PNG",
+                      help="render headless to this PNG instead of opening a window (needs a Vulkan driver such as mesa's)")
+    view.set_defaults(run=run_view)
 
     peer = subparsers.add_parser(
         "peer",
@@ -55,8 +67,35 @@ def run_live(args) -> int:
                      say=lambda text: print(text, flush=True))  # fmt: skip
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
-    print(f"run directory: {out} (events.jsonl, outcome.json, peers/)")
+    print(f"run directory: {out} (events.jsonl, outcome.json, recording.rrd, peers/); replay: bearcat view {out}")
+    if args.viewer:
+        _open_viewer(out / "recording.rrd")
     return 0 if outcome.ended else 1
+
+
+def run_view(args) -> int:
+    from agents.ground_station.recording import write_recording
+    from maps import read_geojson
+
+    rrd = args.run_dir / "recording.rrd"
+    if not rrd.exists():
+        events, map_file = args.run_dir / "events.jsonl", args.run_dir / "map.geojson"
+        if not (events.exists() and map_file.exists()):
+            raise FileNotFoundError(f"{args.run_dir} is not a run directory: it has no recording.rrd nor events.jsonl and map.geojson")
+        write_recording(events, read_geojson(map_file), rrd, name=args.run_dir.name)
+    if args.screenshot is not None:
+        return _open_viewer(rrd, "--headless", "--screenshot-to", str(args.screenshot), "--window-size", "1280x720")
+    return _open_viewer(rrd)
+
+
+def _open_viewer(rrd: Path, *extra: str) -> int:
+    import shutil
+    import subprocess
+
+    viewer = shutil.which("rerun")
+    if viewer is None:
+        raise FileNotFoundError("the Rerun viewer is not installed: pip install rerun-sdk")
+    return subprocess.call([viewer, str(rrd), *extra])
 
 
 def run_peer(args) -> int:

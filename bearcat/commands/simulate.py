@@ -3,8 +3,9 @@
 One trial per seed (``--seed`` for the first, then the next ones), each
 deterministic: the same seed gives the same game and the same event log. A
 line per trial and a tally go to stdout (``--json``: one JSON object per
-trial, then the tally); ``--out DIR`` keeps each trial's event log as
-``DIR/seed-S/events.jsonl`` with its ``outcome.json``.
+trial, then the tally); ``--out DIR`` keeps each trial's run directory
+``DIR/seed-S/``: ``events.jsonl``, ``outcome.json``, ``map.geojson`` and
+the Rerun ``recording.rrd``.
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
 
+from agents.ground_station.recording import finish_run
 from scenarios.schema import list_scenarios, load_scenario
 from scenarios.simulate import simulate
 
@@ -60,6 +62,7 @@ def run(args) -> int:
         record = asdict(outcome)
         if events is not None:
             (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")
+            finish_run(events.parent, scenario.map, scenario.name)
         tally[outcome.winner or "none"] += 1
         if args.json:
             print(json.dumps(record), flush=True)
@@ -74,5 +77,5 @@ def run(args) -> int:
         wins = ", ".join(f"{team} {n}" for team, n in sorted(tally.items()))
         print(f"{scenario.name} under {summary['netem']}: {args.trials} trial(s); wins: {wins}")
         if args.out is not None:
-            print(f"event logs in {args.out}/seed-*/events.jsonl")
+            print(f"event logs and recordings in {args.out}/seed-*/ (bearcat view {args.out}/seed-{first})")
     return 0

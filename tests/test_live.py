@@ -1,0 +1,134 @@
+"""Live runs: every peer a real process on real Zenoh sessions over loopback.
+A game finishes and leaves no process behind; a walker killed mid-game is
+seen gone within two seconds and ends the game with that reason; garbage
+published on every key of the game is dropped and counted while the game
+goes on; Ctrl-C stops everything."""
+
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from agents.ground_station.recorder import read_events
+from bus import keys
+from bus.zenoh_session import ZenohSession, config
+from field import write_scenario
+
+
+@pytest.fixture
+def env(tmp_path_factory):
+    return dict(os.environ, BEARCAT_CACHE_DIR=str(tmp_path_factory.getbasetemp() / "cache"), PYTHONUNBUFFERED="1")
+
+
+def start_run(tmp_path, env, **kw):
+    path = write_scenario(tmp_path, **kw)
+    out = tmp_path / "run"
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
+        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+    )  # fmt: skip
+    return launcher, out, path
+
+
+def peers_of(path) -> list[int]:
+    found = subprocess.run(["pgrep", "-f", f"bearcat peer .*--scenario {path}"], capture_output=True, text=True)
+    return [int(p) for p in found.stdout.split()]
+
+
+def wait_for(predicate, timeout):
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.1)
+    return predicate()
+
+
+def game_started(out):
+    events = out / "events.jsonl"
+    return events.exists() and any(e.get("message", {}).get("phase") == "running" for e in read_events(events))
+
+
+def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path, env):
+    launcher, out, path = start_run(tmp_path, env, time_limit=6.0)
+    output, _ = launcher.communicate(timeout=180)
+    assert launcher.returncode == 0, output
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert outcome["ended"] and outcome["winner"] in ("attacker", "defender"), outcome
+    assert all(code == 0 for code in outcome["peers"].values()), outcome["peers"]
+    assert peers_of(path) == []
+    events = read_events(out / "events.jsonl")
+    kinds = {e["message"]["type"] for e in events if e["event"] == "sent"}
+    assert {"fix", "truth", "guidance", "state", "control"} <= kinds
+    assert (out / "recording.rrd").exists() and "bearcat view" in output
+
+
+def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path, env):
+    launcher, out, path = start_run(
+        tmp_path, env, time_limit=60.0, attacker_behaviour="follow-guidance",
+        defender_behaviour="follow-guidance", defender_aided=True, netem="ideal",
+    )  # fmt: skip
+    try:
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        time.sleep(1.0)
+        (victim,) = [p for p in peers_of(path) if f"--id defender" in open(f"/proc/{p}/cmdline").read().replace("\0", " ")]
+        killed = time.time()
+        os.kill(victim, signal.SIGKILL)
+        output, _ = launcher.communicate(timeout=60)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert outcome["ended"] and outcome["winner"] is None and "walker defender is gone" in outcome["reason"], output
+    ended = [e for e in read_events(out / "events.jsonl") if e.get("message", {}).get("phase") == "ended"]
+    assert ended[0]["t"] - killed < 2.0
+    assert peers_of(path) == []
+
+
+def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_path, env):
+    launcher, out, path = start_run(tmp_path, env, time_limit=8.0, netem="ideal")
+    try:
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        port = json.loads((out / "endpoint.json").read_text())["endpoint"]
+        vandal = ZenohSession("vandal", config(connect=[port]))
+        rng = random.Random(0)
+        game = "test-game"
+        targets = [
+            keys.fix(game, "attacker"), keys.fix(game, "defender"), keys.guidance(game, "attacker"),
+            keys.guidance(game, "defender"), keys.state(game), keys.control(game), keys.truth(game, "attacker"),
+            keys.uav_task(game, "q1"),
+        ]  # fmt: skip
+        time.sleep(0.5)
+        for k in range(400):
+            payload = bytes(rng.randrange(256) for _ in range(rng.randrange(0, 64)))
+            vandal.put(targets[k % len(targets)], payload, reliable=k % 2 == 0)
+        vandal.close()
+        output, _ = launcher.communicate(timeout=120)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert outcome["ended"] and all(code == 0 for code in outcome["peers"].values()), output
+    refused = 0
+    for name in ("gs", "attacker", "defender"):
+        refused += sum(1 for e in read_events(out / "peers" / f"{name}.jsonl") if e["event"] == "refused")
+    assert refused > 100
+
+
+def test_ctrl_c_stops_every_peer(tmp_path, env):
+    launcher, out, path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+    try:
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        launcher.send_signal(signal.SIGINT)
+        launcher.communicate(timeout=60)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert "interrupted" in outcome["reason"] or "stopped" in outcome["reason"], outcome
+    assert wait_for(lambda: peers_of(path) == [], 10)

@@ -1,0 +1,190 @@
+"""The simulation runtime end to end: a finished game with a winner the rules
+allow, the same seed giving the same event log line for line, the network
+profile showing in what the log records, and the referee's rules on their
+own."""
+
+import json
+
+import numpy as np
+import pytest
+import shapely
+
+from agents.ground_station.recorder import read_events
+from agents.ground_station.referee import Contest, Referee
+from bus import keys
+from bus.messages import Control, Truth
+from field import write_scenario
+from maps import load_map
+from scenarios.schema import load_scenario
+from scenarios.simulate import simulate
+
+
+@pytest.fixture(autouse=True)
+def cache(tmp_path_factory, monkeypatch):
+    monkeypatch.setenv("BEARCAT_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "cache"))
+
+
+def play(tmp_path, seed=0, netem=None, name="run", **kw):
+    scenario = load_scenario(write_scenario(tmp_path, **kw))
+    events = tmp_path / name / "events.jsonl"
+    return simulate(scenario, seed=seed, netem=netem, events=events), read_events(events)
+
+
+def test_a_game_finishes_with_a_winner_and_a_reason_the_rules_give(tmp_path):
+    outcome, events = play(tmp_path)
+    assert outcome.ended and outcome.winner in ("attacker", "defender")
+    assert any(word in outcome.reason for word in ("captured", "returned the flag", "time limit"))
+    assert events[-1]["event"] == "outcome" and events[-1]["winner"] == outcome.winner
+    states = [e["message"] for e in events if e["event"] == "sent" and e["message"]["type"] == "state"]
+    assert [s["phase"] for s in states][0] == "waiting" and states[-1]["phase"] == "ended"
+    assert states[-1]["elapsed"] == pytest.approx(outcome.elapsed)
+
+
+def test_the_same_seed_gives_the_same_event_log_and_another_seed_does_not(tmp_path):
+    play(tmp_path, seed=5, name="a")
+    play(tmp_path, seed=5, name="b")
+    play(tmp_path, seed=6, name="c")
+    a, b, c = ((tmp_path / n / "events.jsonl").read_bytes() for n in "abc")
+    assert a == b
+    assert a != c
+
+
+def test_guidance_comes_from_fixes_the_network_delivered(tmp_path):
+    outcome, events = play(tmp_path, netem="3g-degraded", seed=1)
+    impaired = [e for e in events if e["event"] == "impaired"]
+    actions = {e["action"] for e in impaired}
+    assert "dropped" in actions and "delivered" in actions
+    # Nothing on a truth or control key is ever impaired.
+    assert not [e for e in impaired if "/truth/" in e["key"] or e["key"].endswith("/control")]
+    # Every fix the ground station received was sent before it arrived, and
+    # the lost ones (by seq) are exactly those the shim dropped on that link.
+    sent = {(e["key"], e["message"]["seq"]): e["t"] for e in events if e["event"] == "sent" and "/fix/" in e["key"]}
+    got = [(e["key"], e["seq"], e["t"]) for e in events if e["event"] == "received" and e["receiver"] == "gs" and "/fix/" in e["key"]]
+    assert got and all(t >= sent[(k, s)] for k, s, t in got)
+    dropped = sum(1 for e in impaired if e["action"] == "dropped" and "/fix/" in e["key"] and e["receiver"] == "gs")
+    duplicated = sum(1 for e in impaired if e["action"] == "duplicated" and "/fix/" in e["key"] and e["receiver"] == "gs")
+    ended = max(e["t"] for e in events if e["event"] != "outcome")
+    in_time = [k for k, t in sent.items() if t < ended - 3.0]  # sent early enough to have arrived
+    received = {(k, s) for k, s, _ in got}
+    assert len(in_time) - sum(1 for k in in_time if k in received) <= dropped
+    assert len(got) - len(received) == duplicated
+
+
+def test_ideal_network_delivers_every_fix_at_once(tmp_path):
+    _, events = play(tmp_path, netem="ideal")
+    sent = {(e["key"], e["message"]["seq"]): e["t"] for e in events if e["event"] == "sent" and "/fix/" in e["key"]}
+    got = {(e["key"], e["seq"]): e["t"] for e in events if e["event"] == "received" and e["receiver"] == "gs" and "/fix/" in e["key"]}
+    assert got and set(got) == set(sent) and all(got[k] == sent[k] for k in got)
+    assert not [e for e in events if e["event"] == "impaired"]
+
+
+def test_an_aided_defender_that_starts_winning_keeps_the_attacker_out(tmp_path):
+    outcome, _ = play(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, netem="ideal", time_limit=20.0)
+    assert outcome.winner == "defender"
+
+
+def test_an_unopposed_direct_attacker_returns_the_flag(tmp_path):
+    # The defender starts far behind the attacker, who just runs home.
+    outcome, _ = play(tmp_path, attacker_behaviour="direct", attacker=(25.0, 30.0), defender=(45.0, 2.0), netem="ideal")
+    assert outcome.winner == "attacker" and "returned the flag" in outcome.reason
+    assert outcome.elapsed == pytest.approx((45.0 - 30.0) / 3.0, abs=1.5)
+
+
+# ---------------------------------------------------------------------- referee
+
+
+def referee(**kw):
+    field = load_map("field-50")
+    home = field.region("home").geometry
+    flag = field.region("flag").geometry
+    contest = Contest(
+        runners=("a",), chasers=("d",), capture_radius=2.5, time_limit=kw.get("limit", 60.0), teams=("attacker", "defender"),
+        targets=(("home", home),), forbidden=(("flag", flag), ("return", home)), flag_taken=True,
+    )  # fmt: skip
+    return Referee("g", field, contest), field
+
+
+def truth(field, agent, x, y, t):
+    lat, lon = field.to_geodetic(x, y)
+    return keys.truth("g", agent), Truth(agent=agent, t=t, lat=lat, lon=lon)
+
+
+def run_referee(ref, field, tracks, dt=0.1):
+    """Feed positions (agent -> list of (x, y) per tick) and tick; the last state."""
+    ref.handle(keys.control("g"), Control(t=0.0, command="start"), 0.0)
+    last = None
+    for k in range(len(next(iter(tracks.values())))):
+        t = (k + 1) * dt
+        for agent, track in tracks.items():
+            ref.handle(*truth(field, agent, *track[k], t), t)
+        for send in ref.tick(t):
+            last = send.message
+        if last is not None and last.phase == "ended":
+            break
+    return last
+
+
+def test_agents_that_pass_through_each_other_within_a_step_are_captured():
+    ref, field = referee()
+    # Head-on at 30 m/s each: 6 m apart, then 6 m apart the other way, in one step.
+    state = run_referee(ref, field, {"a": [(22.0, 20.0), (28.0, 20.0)], "d": [(28.0, 20.0), (22.0, 20.0)]})
+    assert state.phase == "ended" and state.winner == "defender" and state.captured == ["a"]
+
+
+def test_the_attacker_wins_by_reaching_home_and_the_defender_forfeits_by_entering_it():
+    ref, field = referee()
+    state = run_referee(ref, field, {"a": [(10.0, 40.0), (10.0, 46.0)], "d": [(40.0, 20.0)] * 2})
+    assert state.winner == "attacker" and "returned the flag" in state.reason
+    ref, field = referee()
+    state = run_referee(ref, field, {"a": [(10.0, 20.0)] * 2, "d": [(40.0, 44.0), (40.0, 46.0)]})
+    assert state.winner == "attacker" and "entered the return region" in state.reason
+
+
+def test_time_runs_out_for_the_attacker_and_a_vanished_peer_ends_the_game():
+    ref, field = referee(limit=1.0)
+    state = run_referee(ref, field, {"a": [(10.0, 20.0)] * 20, "d": [(40.0, 20.0)] * 20})
+    assert state.winner == "defender" and "time limit" in state.reason and state.elapsed == pytest.approx(1.0)
+    ref, field = referee()
+    run_referee(ref, field, {"a": [(10.0, 20.0)] * 2, "d": [(40.0, 20.0)] * 2})
+    (send,) = ref.peer(keys.alive("g", "walker", "d"), False, 0.5)
+    assert send.message.phase == "ended" and send.message.winner is None and "walker d is gone" in send.message.reason
+
+
+def test_outcome_json_of_the_cli_matches_the_event_log(tmp_path):
+    from bearcat.cli import main
+
+    path = write_scenario(tmp_path)
+    assert main(["simulate", str(path), "--trials", "2", "--seed", "4", "--out", str(tmp_path / "out"), "--json"]) == 0
+    for seed in (4, 5):
+        outcome = json.loads((tmp_path / "out" / f"seed-{seed}" / "outcome.json").read_text())
+        last = read_events(tmp_path / "out" / f"seed-{seed}" / "events.jsonl")[-1]
+        assert (outcome["winner"], outcome["reason"]) == (last["winner"], last["reason"])
+        assert (tmp_path / "out" / f"seed-{seed}" / "recording.rrd").stat().st_size > 1000
+
+
+def test_walkers_never_enter_buildings_or_forbidden_regions():
+    from agents.human.walker import Walker
+
+    campus = load_map("campus-200")
+    hall = campus.obstacles[0]
+    rng = np.random.default_rng(0)
+    home = campus.region("home").geometry
+    w = Walker(campus, (100.0, 70.0), speed=5.0, heading_error=20.0, keep_out=home, rng=rng)
+    w.intend(0.0, (0.0, 1.0))  # straight north, into the hall and then home
+    for k in range(400):
+        w.step(k * 0.1, 0.1)
+        p = shapely.Point(w.position)
+        assert not hall.contains(p) and not home.contains(p)
+    assert w.position[1] < 165.0
+
+
+def test_a_walker_turns_only_after_its_reaction_time():
+    from agents.human.walker import Walker
+
+    w = Walker(load_map("field-50"), (25.0, 25.0), speed=1.0, reaction=0.5, rng=np.random.default_rng(0))
+    w.intend(0.0, (1.0, 0.0))
+    positions = []
+    for k in range(10):
+        positions.append(w.step(k * 0.1, 0.1).copy())
+    moved = [float(np.hypot(*(b - a))) for a, b in zip(positions, positions[1:])]
+    assert positions[4][0] == pytest.approx(25.0) and moved[-1] == pytest.approx(0.1)
