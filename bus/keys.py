@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import re
 from dataclasses import dataclass
+from functools import lru_cache
 
 from bus.errors import BusError
 
@@ -126,8 +127,10 @@ class ParsedKey:
     role: str | None = None
 
 
+@lru_cache(maxsize=4096)
 def parse(key: str) -> ParsedKey:
-    """The kind and names of a concrete key; a BusError for any other string."""
+    """The kind and names of a concrete key; a BusError for any other string.
+    (A game has a few dozen keys, each parsed on every message: cached.)"""
     chunks = str(key).split("/")
     if len(chunks) < 3 or chunks[0] != ROOT or not _NAME.match(chunks[1]):
         raise BusError(f"key {key!r} is not a bearcat key")

@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 
 from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve
-from agents.ground_station.guidance import CtfGuidanceService
+from agents.ground_station.guidance import CtfAdvisor, GuidanceService
 from agents.ground_station.referee import Contest, Referee
 from agents.human import behaviours
 from agents.human.agent import HumanAgent
@@ -92,13 +92,15 @@ class _CtfGame:
         )  # fmt: skip
         return Referee(self.scenario.name, self.scenario.map, contest)
 
-    def guidance(self, progress=None) -> CtfGuidanceService:
+    def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
         solved = load_or_solve(CtfGame(s.map, s.rules["grid"], self.rules), s.rules["stages"], progress=progress)
-        return CtfGuidanceService(
-            s.name, s.map, CtfGuidance(solved.solution), attacker=self.attacker.id, defender=self.defender.id,
-            aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate, phase=self.phase,
-        )  # fmt: skip
+        advisor = CtfAdvisor(
+            s.map, CtfGuidance(solved.solution), attacker=self.attacker.id, defender=self.defender.id, phase=self.phase
+        )
+        return GuidanceService(
+            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
+        )
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:

@@ -56,7 +56,7 @@ BEHAVIOUR_OPTIONS = {
     "follow-guidance": {},
     "direct": {"standoff": 6.0, "share": 0.5, "lead": 1.5},
     "fake-out": {"turn_every": 1.5, "spread": 100.0, "margin": 0.0},
-    "go-no-go": {"hold": None, "fresh": 2.0},
+    "go-no-go": {"hold": None, "fresh": 2.0, "margin": 0.0},
     "waypoints": {"points": None, "loop": False},
     "keyboard": {},
 }
@@ -215,6 +215,7 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
     if behaviour == "go-no-go":
         options["hold"] = c.point(options["hold"], f"{at}.options.hold")
         options["fresh"] = c.number(options, "fresh", f"{at}.options", positive=True)
+        options["margin"] = c.number(options, "margin", f"{at}.options")
     elif behaviour == "waypoints":
         points = options["points"]
         if not isinstance(points, list) or not points:

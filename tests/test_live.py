@@ -76,7 +76,7 @@ def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(t
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         time.sleep(1.0)
-        (victim,) = [p for p in peers_of(path) if f"--id defender" in open(f"/proc/{p}/cmdline").read().replace("\0", " ")]
+        (victim,) = [p for p in peers_of(path) if "--id defender" in open(f"/proc/{p}/cmdline").read().replace("\0", " ")]
         killed = time.time()
         os.kill(victim, signal.SIGKILL)
         output, _ = launcher.communicate(timeout=60)

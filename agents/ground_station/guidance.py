@@ -1,8 +1,9 @@
 """The guidance service: what each phone shows, from the fixes the network delivered.
 
-Ten times a second (the scenario's rate) it takes the latest fix of every
-agent, as the ground-station laptop of thesis 3.5 did, and sends each agent
-a ``Guidance``: every agent as last reported, and for an aided agent the
+For each agent, on each of its new fixes and at least ten times a second
+(the scenario's rate), it takes the latest fix of every agent, as the
+ground-station laptop of thesis 3.5 did, and sends that agent a
+``Guidance``: every agent as last reported, and for an aided agent the
 solver's answer at those positions. Capture-the-flag guidance (3.5): the
 attacker sees the defender's winning region R_D(x_a), its optimal heading
 and go (the reported state is an attacker win); the defender sees R_A(x_d)
@@ -47,39 +48,28 @@ class _Fixes:
         return [Report(agent, f.t, f.lat, f.lon) for agent, (_, _, f) in self.latest.items()]
 
 
-class CtfGuidanceService:
-    """Guidance for a 1 vs 1 capture-the-flag game from its solved sets."""
+class GuidanceService:
+    """Sends each of ``agents`` its guidance: as soon as a new fix of that
+    agent arrives (so a phone's answer follows its own fix at once), and at
+    the scenario's ``rate`` in any case (so it also follows the others'
+    moves), never faster than twice that rate. ``advisor(agent, fixes, now)``
+    adds the solver's part for an aided agent (None: positions only)."""
 
     role = "ground-station"
     watches: tuple[str, ...] = ()
 
-    def __init__(
-        self,
-        game: str,
-        game_map: Map,
-        solved: CtfGuidance,
-        *,
-        attacker: str,
-        defender: str,
-        aided: dict[str, bool],
-        rate: float = 10.0,
-        phase: str = "capture",
-        name: str = "gs",
-    ) -> None:
+    def __init__(self, game: str, game_map: Map, agents, *, advisor=None, aided=None, rate: float = 10.0,
+                 name: str = "gs") -> None:  # fmt: skip
         self.game, self.name, self.map = game, name, game_map
-        self.solved = solved
-        self.attacker, self.defender = attacker, defender
-        self.aided = aided
+        self.agents = tuple(agents)
+        self.advisor = advisor
+        self.aided = dict(aided or {})
         self.period = 1.0 / rate
-        self.phase = phase
         self.ended = False
         self.subscriptions = (keys.every(game, "fix"), keys.state(game))
         self.fixes = _Fixes(game_map)
         self.seq = 0
-        spacing = min(solved.arena.grid.spacing)
-        # Fixes outside the free space go to its nearest point a whisker inside.
-        self._inside = game_map.free_space.buffer(-0.05 * spacing)
-        self._simplify = 0.25 * spacing
+        self._last = {a: -np.inf for a in self.agents}
 
     def start(self, now: float) -> list[Send]:
         return []
@@ -87,33 +77,73 @@ class CtfGuidanceService:
     def handle(self, key: str, message: Message, now: float) -> list[Send]:
         if isinstance(message, Fix):
             self.fixes.take(message)
+            if message.agent in self._last and now - self._last[message.agent] >= 0.5 * self.period:
+                return self._send([message.agent], now)
         elif isinstance(message, GameState):
             self.ended = message.phase == "ended"
-            self.phase = "capture" if message.flag_holder is None else "return"
+            if self.advisor is not None:
+                self.advisor.state(message)
         return []
 
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         return []
 
     def tick(self, now: float) -> list[Send]:
-        if self.ended:
+        due = [a for a in self.agents if now - self._last[a] >= self.period - 1e-9]
+        return self._send(due, now)
+
+    def _send(self, agents, now: float) -> list[Send]:
+        if self.ended or not agents:
             return []
         reports = self.fixes.reports()
         out = []
-        for agent in (self.attacker, self.defender):
-            fields = self._ctf(agent) if self.aided.get(agent) else {"game": "none"}
+        for agent in agents:
+            fields = {"game": "none"}
+            if self.advisor is not None and self.aided.get(agent):
+                fields = self.advisor(agent, self.fixes, now)
             self.seq += 1
-            message = Guidance(agent=agent, seq=self.seq, t=now, reports=reports, **fields)
-            out.append(Send(keys.guidance(self.game, agent), message))
+            self._last[agent] = now
+            out.append(Send(keys.guidance(self.game, agent), Guidance(agent=agent, seq=self.seq, t=now, reports=reports, **fields)))
         return out
 
-    def _ctf(self, agent: str) -> dict:
-        latest = self.fixes.latest
+
+class CtfAdvisor:
+    """Capture-the-flag guidance from the solved sets (thesis 3.5): the
+    attacker's phone shows R_D(x_a), its heading and go; the defender's
+    R_A(x_d) and its heading."""
+
+    def __init__(self, game_map: Map, solved: CtfGuidance, *, attacker: str, defender: str, phase: str = "capture"):
+        self.map = game_map
+        self.solved = solved
+        self.attacker, self.defender = attacker, defender
+        self.phase = phase
+        spacing = min(solved.arena.grid.spacing)
+        # Fixes outside the free space go to its nearest point a whisker inside.
+        self._inside = game_map.free_space.buffer(-0.05 * spacing)
+        self._simplify = 0.25 * spacing
+        self._last: dict[str, tuple[tuple, dict]] = {}
+
+    def state(self, message: GameState) -> None:
+        self.phase = "capture" if message.flag_holder is None else "return"
+
+    def __call__(self, agent: str, fixes: _Fixes, now: float) -> dict:
+        """The CTF fields of ``agent``'s guidance. They depend only on the two
+        latest fixes and the phase, which change about once a second while
+        guidance goes out ten times, so the last answer per agent is kept."""
+        latest = fixes.latest
         if self.attacker not in latest or self.defender not in latest:
             return {"game": "ctf", "note": "waiting for both players' fixes"}
+        a, d = latest[self.attacker][0], latest[self.defender][0]
+        key = (a[0], a[1], d[0], d[1], self.phase)
+        held = self._last.get(agent)
+        if held is None or held[0] != key:
+            held = self._last[agent] = (key, self._answer(agent, a, d))
+        return held[1]
+
+    def _answer(self, agent: str, a: np.ndarray, d: np.ndarray) -> dict:
         try:
-            a = self._placeable(latest[self.attacker][0])
-            d = self._placeable(latest[self.defender][0])
+            a = self._placeable(a)
+            d = self._placeable(d)
             report = self.solved.evaluate(a, d, self.phase)
         except InputError as exc:
             return {"game": "ctf", "note": str(exc)[:200]}
@@ -125,11 +155,10 @@ class CtfGuidanceService:
             values, side, region_of, heading = (
                 self.solved.attacker_region_values(d, self.phase), "attacker", self.attacker, report.defender_heading,
             )  # fmt: skip
-        region = self._rings(self.solved.polygons(values, side))
         return {
             "game": "ctf",
             "heading": None if heading is None else _bearing(heading),
-            "region": region,
+            "region": self._rings(self.solved.polygons(values, side)),
             "region_of": region_of,
             "go": report.winner == "attacker" if agent == self.attacker else None,
             "value": float(report.value),

@@ -145,20 +145,23 @@ class FakeOut:
 
 
 class GoNoGo:
-    """Hold at ``hold`` until go with every opponent's report younger than
-    ``fresh`` seconds; then commit. ``committed_at`` records when."""
+    """Hold at ``hold`` until the display says go, by at least ``margin``
+    metres of the solver's value, with every opponent's report younger than
+    ``fresh`` seconds; then commit for good. ``committed_at`` records when."""
 
     name = "go-no-go"
 
-    def __init__(self, hold, fresh: float = 2.0) -> None:
+    def __init__(self, hold, fresh: float = 2.0, margin: float = 0.0) -> None:
         self.hold = np.asarray(hold, float)
         self.fresh = float(fresh)
+        self.margin = float(margin)
         self.committed_at: float | None = None
 
     def decide(self, now, me, screen, situation):
         if self.committed_at is None:
             fresh = all(screen.age(o, now) <= self.fresh for o in situation.opponents)
-            if screen.go and fresh and screen.heading is not None:
+            clear = screen.value is not None and screen.value <= -self.margin
+            if screen.go and clear and fresh and screen.heading is not None:
                 self.committed_at = now
         if self.committed_at is not None:
             return screen.heading if screen.heading is not None else situation.navigator.toward(situation.goal, me)

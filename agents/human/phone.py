@@ -81,6 +81,8 @@ class Phone:
         if self._buildings is not None:
             shapely.prepare(self._buildings)
         self._heading = 0.0
+        self._region_shown: list = []
+        self._region_local: list[np.ndarray] = []
 
     def fix(self, now: float, position, heading: float | None) -> Fix | None:
         """A fix of the true ``position`` (metres) and ``heading`` (radians from
@@ -112,7 +114,10 @@ class Phone:
         to_local = self._to_local
         s.shown_at, s.computed_at, s.game = now, guidance.t, guidance.game
         s.heading = None if guidance.heading is None else _unit(math.radians(guidance.heading))
-        s.region = [to_local(ring) for ring in guidance.region]
+        if guidance.region != self._region_shown:  # mostly the same rings, sent ten times a second
+            self._region_shown = guidance.region
+            self._region_local = [to_local(ring) for ring in guidance.region]
+        s.region = self._region_local
         s.region_of, s.go, s.value, s.note = guidance.region_of, guidance.go, guidance.value, guidance.note
         s.boundary = [to_local(line) for line in guidance.boundary]
         for r in guidance.reports:

@@ -1,0 +1,63 @@
+"""``bearcat study fake-out|go-no-go``: the field studies of thesis 3.5 as
+batches of simulated games, resumable, with a table at the end
+(``DIR/results.jsonl`` per game, ``DIR/summary.json``)."""
+
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+from scenarios.studies import STUDIES
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "study",
+        help="the fake-out and go/no-go studies of thesis 3.5, as batches of simulated games",
+        description="fake-out: the aided attacker's fake-out against an unaided and an aided defender (3.5.1). "
+        "go-no-go: how often an attacker's go, decided on what the network delivered, is false, per network "
+        "profile (3.5.2).",
+    )
+    p.add_argument("study", choices=tuple(STUDIES))
+    p.add_argument("--trials", type=int, default=50, metavar="N", help="games per scenario and profile (default 50)")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the first game (default 0)")
+    p.add_argument("--netem", nargs="+", metavar="PROFILE", help="profiles to compare (go-no-go; default all four)")
+    p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per core)")
+    p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from tqdm import tqdm
+
+    from netem.profiles import load_profile
+    from scenarios.batch import run_batch
+    from scenarios.cast import cast
+    from scenarios.schema import load_scenario
+    from scenarios.studies import play_task, study_tasks, summarise
+
+    for profile in args.netem or ():
+        load_profile(profile)
+    if args.trials < 1:
+        print("bearcat: error: --trials must be at least 1", file=sys.stderr)
+        return 2
+    out = args.out or Path("studies") / args.study
+    out.mkdir(parents=True, exist_ok=True)
+    # Solve each scenario's game once here, so the workers only load it.
+    for name in STUDIES[args.study]["scenarios"]:
+        scenario = load_scenario(name)
+        cast(scenario, load_profile(scenario.netem), 0, people=[], ground=True)
+    tasks = study_tasks(args.study, args.trials, args.seed, args.netem)
+    with tqdm(total=len(tasks), desc=args.study, unit="game", file=sys.stderr) as bar:
+        results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers,
+                            on_result=lambda r: bar.update(1))  # fmt: skip
+    rows = summarise(results.values())
+    (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
+    print(f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}")
+    for r in rows:
+        rate = "" if r["false_go_rate"] is None else f" ({100 * r['false_go_rate']:.0f}%)"
+        print(f"{r['scenario']:<26}{r['netem'] or 'its own':<13}{r['games']:>6}"
+              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate}")  # fmt: skip
+    print(f"per-game results in {out}/results.jsonl; replay one with bearcat simulate SCENARIO --seed S --netem P")
+    return 0

@@ -1,0 +1,71 @@
+"""The field studies of thesis 3.5 as batches of simulated games.
+
+``fake-out`` (3.5.1): the aided attacker, starting in a defender-winning
+position, fakes out an unaided defender, and tries the same against an
+aided one. ``go-no-go`` (3.5.2): an attacker waiting by cover commits when
+its display says go; a go the game then loses is a false go, and how often
+those happen depends on the network profile.
+
+Each game is one task of the resumable batch runner, seeded on its own, so
+any game can be replayed with ``bearcat simulate SCENARIO --seed S --netem P``.
+"""
+
+from __future__ import annotations
+
+from collections import defaultdict
+
+STUDIES = {
+    "fake-out": {"scenarios": ("fake-out", "fake-out-aided-defender"), "profiles": (None,)},
+    "go-no-go": {"scenarios": ("go-no-go",), "profiles": ("ideal", "wifi", "3g", "3g-degraded")},
+}
+
+
+def study_tasks(study: str, trials: int, seed: int, profiles=None) -> list[dict]:
+    spec = STUDIES[study]
+    tasks = []
+    for scenario in spec["scenarios"]:
+        for profile in profiles or spec["profiles"]:
+            for s in range(seed, seed + trials):
+                tasks.append({"key": f"{scenario}/{profile or 'own'}/{s}", "scenario": scenario, "netem": profile, "seed": s})
+    return tasks
+
+
+def play_task(task: dict) -> dict:
+    """One game of a study; the result row."""
+    from dataclasses import asdict
+
+    from scenarios.schema import load_scenario
+    from scenarios.simulate import simulate
+
+    outcome = simulate(load_scenario(task["scenario"]), seed=task["seed"], netem=task["netem"])
+    row = {k: v for k, v in asdict(outcome).items() if k in ("winner", "reason", "elapsed", "netem", "notes")}
+    went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
+    return {**row, "key": task["key"], "scenario": task["scenario"], "seed": task["seed"], "went_at": went}
+
+
+def summarise(results) -> list[dict]:
+    """Per scenario and profile: games, attacker wins, goes (the attacker
+    committed), goes that won, false goes (committed, then lost), and rates."""
+    groups = defaultdict(list)
+    for r in results:
+        groups[(r["scenario"], r["netem"])].append(r)
+    rows = []
+    for (scenario, netem), games in sorted(groups.items()):
+        wins = sum(g["winner"] == "attacker" for g in games)
+        went = [g for g in games if g["went_at"] is not None]
+        good = sum(g["winner"] == "attacker" for g in went)
+        rows.append({
+            "scenario": scenario, "netem": netem, "games": len(games), "attacker_wins": wins,
+            "attacker_win_rate": round(wins / len(games), 3), "goes": len(went), "goes_won": good,
+            "false_goes": len(went) - good, "false_go_rate": round((len(went) - good) / len(went), 3) if went else None,
+            "median_go_time": _median([g["went_at"] for g in went]),
+        })  # fmt: skip
+    return rows
+
+
+def _median(values):
+    values = sorted(v for v in values if v is not None)
+    if not values:
+        return None
+    mid = len(values) // 2
+    return round(values[mid] if len(values) % 2 else 0.5 * (values[mid - 1] + values[mid]), 2)
