@@ -39,10 +39,13 @@ class _Fixes:
         self.map = game_map
         self.latest: dict[str, tuple[np.ndarray, float, Fix]] = {}
 
-    def take(self, fix: Fix) -> None:
+    def take(self, fix: Fix) -> bool:
+        """Keep ``fix`` if it is newer than the one held; whether it was."""
         held = self.latest.get(fix.agent)
-        if held is None or fix.t >= held[1]:
+        if held is None or fix.t > held[1]:
             self.latest[fix.agent] = (np.array(self.map.to_local(fix.lat, fix.lon)), fix.t, fix)
+            return True
+        return False
 
     def reports(self) -> list[Report]:
         return [Report(agent, f.t, f.lat, f.lon) for agent, (_, _, f) in self.latest.items()]
@@ -50,10 +53,11 @@ class _Fixes:
 
 class GuidanceService:
     """Sends each of ``agents`` its guidance: as soon as a new fix of that
-    agent arrives (so a phone's answer follows its own fix at once), and at
-    the scenario's ``rate`` in any case (so it also follows the others'
-    moves), never faster than twice that rate. ``advisor(agent, fixes, now)``
-    adds the solver's part for an aided agent (None: positions only)."""
+    agent arrives (so a phone's answer follows its own fix at once, and no
+    faster than its fixes come), and at the scenario's ``rate`` whenever a
+    period passed without one (so it also follows the others' moves).
+    ``advisor(agent, fixes, now)`` adds the solver's part for an aided agent
+    (None: positions only)."""
 
     role = "ground-station"
     watches: tuple[str, ...] = ()
@@ -76,8 +80,7 @@ class GuidanceService:
 
     def handle(self, key: str, message: Message, now: float) -> list[Send]:
         if isinstance(message, Fix):
-            self.fixes.take(message)
-            if message.agent in self._last and now - self._last[message.agent] >= 0.5 * self.period:
+            if self.fixes.take(message) and message.agent in self._last:
                 return self._send([message.agent], now)
         elif isinstance(message, GameState):
             self.ended = message.phase == "ended"

@@ -1,0 +1,192 @@
+"""The field simulator's speed: how fast ``simulate`` runs a game against
+the wall clock, and the fix-to-guidance latency over Zenoh on loopback.
+
+    python benchmarks/field.py                 # both, 10 and 50 phones
+    python benchmarks/field.py --phones 10     # latency with 10 phones only
+    python benchmarks/field.py --simulate-only
+
+Latency: N phone processes each publish a GPS fix ten times a second and
+wait for the guidance that answers it; the ground station (the real
+``GuidanceService`` under the live runtime, ``ideal`` network) runs in this
+process. A fix is answered when a guidance arrives whose report of that
+phone is that fix or a newer one (guidance shows the latest fix); latency is
+the time from publishing the fix to that arrival, on one clock. Lost fixes
+are counted where they should arrive, at the ground station. The peer it is compared
+with is a bare Zenoh echo over the same links (no codec, no agents): the
+ratio is what our layers cost on top of the transport.
+Targets: p99 under 20 ms with 10 phones and no fix unanswered; ``simulate``
+at least 50x faster than real time for a 1 vs 1 game with 10 Hz guidance.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import json
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+
+GAME = "bench"
+
+
+def phone(args) -> None:
+    """One phone process: fixes at 10 Hz, latencies of their answers to a JSON file."""
+    from bus import keys
+    from bus.codec import decode, encode
+    from bus.messages import Fix, Guidance
+    from bus.zenoh_session import ZenohSession, config
+
+    session = ZenohSession(args.phone, config(connect=[args.connect]))
+    sent: dict[float, float] = {}
+    latencies: list[float] = []
+    echo_rtts: list[float] = []
+    lock = threading.Lock()
+
+    def on_guidance(key, payload, sender):
+        now = time.time()
+        message = decode(payload, key)
+        if isinstance(message, Guidance):
+            with lock:
+                for r in message.reports:
+                    if r.agent == args.phone:
+                        # This fix, and any older one still waiting, is now reflected on the screen.
+                        for t in [t for t in sent if t <= r.t]:
+                            latencies.append(now - sent.pop(t))
+
+    def on_echo(key, payload, sender):
+        echo_rtts.append(time.time() - float(payload.decode()))
+
+    session.subscribe(keys.guidance(GAME, args.phone), on_guidance)
+    session.subscribe(f"bench/echo/{args.phone}/back", on_echo)
+    session.declare_token(keys.alive(GAME, "phone", args.phone))
+    time.sleep(args.warmup)
+    end = time.time() + args.duration
+    seq, due = 0, time.monotonic()
+    while time.time() < end:
+        seq += 1
+        t = time.time()
+        with lock:
+            sent[t] = t
+        lat, lon = 37.8719 + 1e-6 * (seq % 100), -122.2585
+        session.put(keys.fix(GAME, args.phone), encode(Fix(agent=args.phone, seq=seq, t=t, lat=lat, lon=lon)), reliable=False)
+        session.put(f"bench/echo/{args.phone}/out", str(time.time()).encode(), reliable=False)
+        due += 0.1
+        time.sleep(max(due - time.monotonic(), 0))
+    time.sleep(1.0)
+    session.close()
+    Path(args.out).write_text(json.dumps({"latencies": latencies, "sent": seq, "answered": len(latencies),
+                                          "echo": echo_rtts}))  # fmt: skip
+
+
+def latency(n: int, duration: float) -> dict:
+    from agents.ground_station.guidance import GuidanceService
+    from bus import keys
+    from bus.codec import Inbox
+    from bus.zenoh_session import ZenohSession, config
+    from maps import load_map
+    from scenarios.launch import free_port
+    from scenarios.live import run_peer
+
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    ids = [f"p{k}" for k in range(n)]
+    session = ZenohSession("gs", config(listen=[endpoint]))
+    # The bare-Zenoh peer: echo every ping straight back.
+    echo = ZenohSession("echo", config(connect=[endpoint]))
+    echo.subscribe("bench/echo/*/out", lambda k, p, s: echo.put(k.rsplit("/", 1)[0] + "/back", p, reliable=False))
+    service = GuidanceService(GAME, load_map("field-50"), ids, rate=10.0)
+    received: dict[str, set] = {pid: set() for pid in ids}
+
+    def count(key, payload, sender):
+        message = Inbox("count").accept(key, payload)
+        if message is not None:
+            received[message.agent].add(message.seq)
+
+    session.subscribe(keys.every(GAME, "fix"), count)
+    seen = set()
+    session.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, up: seen.add(k) if up else None)
+    with tempfile.TemporaryDirectory() as tmp:
+        procs = [
+            subprocess.Popen([sys.executable, __file__, "--phone", pid, "--connect", endpoint, "--duration", str(duration),
+                              "--warmup", "3", "--out", f"{tmp}/{pid}.json"])  # fmt: skip
+            for pid in ids
+        ]
+
+        async def serve():
+            task = asyncio.create_task(run_peer([service], session, GAME))
+            await asyncio.sleep(duration + 12.0)
+            task.cancel()
+
+        try:
+            asyncio.run(serve())
+        except asyncio.CancelledError:
+            pass
+        for p in procs:
+            p.wait(timeout=60)
+        results = [json.loads(Path(f"{tmp}/{pid}.json").read_text()) for pid in ids]
+    echo.close()
+    lat = np.concatenate([r["latencies"] for r in results]) * 1e3
+    rtt = np.concatenate([r["echo"] for r in results]) * 1e3
+    sent = sum(r["sent"] for r in results)
+    lost = sent - sum(len(seqs) for seqs in received.values())
+    return {
+        "phones": n, "fixes": sent, "lost": lost, "unanswered": sent - sum(r["answered"] for r in results),
+        "p50_ms": float(np.percentile(lat, 50)), "p99_ms": float(np.percentile(lat, 99)),
+        "echo_p50_ms": float(np.percentile(rtt, 50)), "echo_p99_ms": float(np.percentile(rtt, 99)),
+    }  # fmt: skip
+
+
+def simulate_speed(games: int) -> list[dict]:
+    from scenarios.schema import load_scenario
+    from scenarios.simulate import simulate
+
+    rows = []
+    for name in ("fake-out-aided-defender", "fake-out", "go-no-go"):
+        scenario = load_scenario(name)
+        simulate(scenario, seed=0)  # the solve and the first compiles are not what is timed
+        game, wall = 0.0, 0.0
+        for seed in range(games):
+            t = time.perf_counter()
+            outcome = simulate(scenario, seed=seed)
+            wall += time.perf_counter() - t
+            game += outcome.elapsed
+        rows.append({"scenario": name, "games": games, "game_s": game, "wall_s": wall, "speedup": game / wall})
+    return rows
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--phones", type=int, nargs="+", default=[10, 50])
+    parser.add_argument("--duration", type=float, default=20.0, help="seconds of fixes per phone")
+    parser.add_argument("--games", type=int, default=5)
+    parser.add_argument("--simulate-only", action="store_true")
+    parser.add_argument("--latency-only", action="store_true")
+    parser.add_argument("--phone", help=argparse.SUPPRESS)
+    parser.add_argument("--connect", help=argparse.SUPPRESS)
+    parser.add_argument("--warmup", type=float, default=3.0, help=argparse.SUPPRESS)
+    parser.add_argument("--out", help=argparse.SUPPRESS)
+    args = parser.parse_args()
+    if args.phone:
+        return phone(args)
+    if not args.latency_only:
+        print("simulate, in-process virtual time (target: >= 50x real time)")
+        for r in simulate_speed(args.games):
+            print(f"  {r['scenario']:<26} {r['games']} games, {r['game_s']:7.1f} s of play in {r['wall_s']:6.2f} s: "
+                  f"{r['speedup']:6.1f}x real time")  # fmt: skip
+    if not args.simulate_only:
+        print("fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)")
+        for n in args.phones:
+            r = latency(n, args.duration)
+            print(f"  {n:3d} phones: {r['fixes']} fixes, {r['lost']} lost, {r['unanswered']} unanswered; latency p50 {r['p50_ms']:.2f} ms, "
+                  f"p99 {r['p99_ms']:.2f} ms; bare Zenoh echo p50 {r['echo_p50_ms']:.2f} ms, p99 {r['echo_p99_ms']:.2f} ms "
+                  f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
