@@ -28,6 +28,7 @@ class Navigator:
     def __init__(self, game_map: Map, spacing: float | None = None) -> None:
         xmin, ymin, xmax, ymax = game_map.bounds
         self.raster = rasterize(game_map, spacing or max(xmax - xmin, ymax - ymin) / 200)
+        self.area = game_map.free_space
         self.grid = self.raster.grid
         self._fields: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
 

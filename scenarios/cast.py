@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 
 from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve
-from agents.ground_station.guidance import CtfAdvisor, GuidanceService
+from agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor
 from agents.ground_station.referee import Contest, Referee
 from agents.human import behaviours
 from agents.human.agent import HumanAgent
@@ -52,9 +52,11 @@ class Cast:
 def cast(scenario: Scenario, profile: Profile, seed: int, *, people=None, ground: bool = True, ctf_progress=None) -> Cast:
     """The agents of ``scenario``: the people named in ``people`` (default all)
     and, with ``ground``, the ground station's referee and guidance service."""
-    if scenario.game != "ctf":
-        raise ScenarioError(f"{scenario.source}: running {scenario.game} games is not supported yet; ctf is")
-    game = _CtfGame(scenario)
+    if scenario.game not in GAMES:
+        raise ScenarioError(
+            f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
+        )
+    game = GAMES[scenario.game](scenario)
     chosen = scenario.ids if people is None else list(people)
     crowd = {a: game.person(scenario.agent(a), profile, seed) for a in chosen}
     if not ground:
@@ -110,6 +112,49 @@ class _CtfGame:
         forbidden = None if attacking else self.flag.union(self.home)
         situation = behaviours.Situation(spec.id, spec.team, (opponent.id,), self.goals[self.phase], forbidden, self._navigator)
         return _person(self.scenario, spec, profile, seed, situation, self.goals, self.phase, keep_out=forbidden)
+
+
+class _PursuitGame:
+    """Cooperative pursuit in a convex field, as in the experiments of thesis
+    5.4: pursuers see the evader's safe-reachable set and their heading; the
+    pursuers win by capture, the evader by lasting the time limit."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        free = scenario.map.free_space
+        if not abs(free.area - free.convex_hull.area) <= 1e-9 * free.area:
+            raise ScenarioError(f"{scenario.source}: pursuit guidance needs a convex field; map {scenario.map.name} is not")
+        evaders = scenario.team("evader")
+        if len(evaders) != 1:
+            raise ScenarioError(f"{scenario.source}: a pursuit game has one evader")
+        self.evader = evaders[0]
+        self.pursuers = scenario.team("pursuer")
+        self._navigator = None
+
+    def referee(self) -> Referee:
+        contest = Contest(
+            runners=(self.evader.id,), chasers=tuple(p.id for p in self.pursuers),
+            capture_radius=self.scenario.rules["capture_radius"], time_limit=self.scenario.time_limit,
+            teams=("evader", "pursuer"), lasting_wins=True,
+        )  # fmt: skip
+        return Referee(self.scenario.name, self.scenario.map, contest)
+
+    def guidance(self, progress=None) -> GuidanceService:
+        s = self.scenario
+        advisor = PursuitAdvisor(s.map, evader=self.evader.id, pursuers=[p.id for p in self.pursuers])
+        return GuidanceService(
+            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
+        )
+
+    def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
+        if self._navigator is None:
+            self._navigator = Navigator(self.scenario.map)
+        opponents = tuple(p.id for p in self.pursuers) if spec.team == "evader" else (self.evader.id,)
+        situation = behaviours.Situation(spec.id, spec.team, opponents, None, None, self._navigator)
+        return _person(self.scenario, spec, profile, seed, situation, {}, "capture")
+
+
+GAMES = {"ctf": _CtfGame, "pursuit": _PursuitGame}
 
 
 def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None) -> HumanAgent:

@@ -188,3 +188,19 @@ def test_a_walker_turns_only_after_its_reaction_time():
         positions.append(w.step(k * 0.1, 0.1).copy())
     moved = [float(np.hypot(*(b - a))) for a, b in zip(positions, positions[1:])]
     assert positions[4][0] == pytest.approx(25.0) and moved[-1] == pytest.approx(0.1)
+
+
+def test_aided_pursuers_capture_the_evader_and_see_their_boundary(tmp_path):
+    from dataclasses import replace
+
+    scenario = replace(load_scenario("pursuit-field"), time_limit=60.0)
+    events = tmp_path / "events.jsonl"
+    outcome = simulate(scenario, netem="ideal", events=events)
+    assert outcome.winner == "pursuer" and outcome.captured == ["evader"]
+    shown = [e["message"] for e in read_events(events) if e["event"] == "sent" and "/guidance/pursuer-" in e["key"]]
+    answered = [m for m in shown if m.get("heading") is not None]
+    assert len(answered) > 0.9 * len(shown)
+    # The evader's cell is shown, and its area only shrinks as the chase goes on.
+    areas = [m["value"] for m in answered if m["agent"] == "pursuer-1"]
+    assert areas[0] > 1000 and areas[-1] < 0.2 * areas[0]
+    assert all(m["boundary"] for m in answered[len(answered) // 2:])

@@ -184,6 +184,66 @@ class CtfAdvisor:
         return rings
 
 
+class PursuitAdvisor:
+    """Cooperative pursuit guidance in a convex field (thesis 5.4): each
+    pursuer's phone shows the evader's safe-reachable set S_e (its Voronoi
+    cell), the pursuer's own active boundary of it, and the heading that
+    shrinks its area fastest (eq. 5.11; straight at the evader for a pursuer
+    without a boundary); ``value`` is the area of S_e in square metres."""
+
+    def __init__(self, game_map: Map, *, evader: str, pursuers) -> None:
+        from solvers.pursuit import area_minimising_headings, voronoi_cell
+
+        self.map = game_map
+        self.evader, self.pursuers = evader, tuple(pursuers)
+        ring = np.asarray(game_map.area.exterior.coords)[:-1]
+        self.domain = ring if game_map.area.exterior.is_ccw else ring[::-1]
+        self._headings, self._cell = area_minimising_headings, voronoi_cell
+        self._last: dict[str, tuple[tuple, dict]] = {}
+
+    def state(self, message: GameState) -> None:
+        pass
+
+    def __call__(self, agent: str, fixes: _Fixes, now: float) -> dict:
+        latest = fixes.latest
+        if agent not in self.pursuers or any(a not in latest for a in (self.evader, *self.pursuers)):
+            return {"game": "pursuit", "note": "waiting for every player's fixes"}
+        e = latest[self.evader][0]
+        ps = np.array([latest[p][0] for p in self.pursuers])
+        key = (tuple(e), ps.tobytes())
+        held = self._last.get(agent)
+        if held is None or held[0] != key:
+            held = self._last[agent] = (key, self._answer(agent, e, ps))
+        return held[1]
+
+    def _answer(self, agent: str, e: np.ndarray, ps: np.ndarray) -> dict:
+        k = self.pursuers.index(agent)
+        try:
+            heading = self._headings(self.domain, e, ps)[k]
+            cell = self._cell(self.domain, e, ps)
+        except InputError as exc:
+            return {"game": "pursuit", "note": str(exc)[:200]}
+        # Pursuer k's active boundary: the cell's corners as far from it as from the evader.
+        on_line = [v for v in cell if abs(np.hypot(*(v - ps[k])) - np.hypot(*(v - e))) < 1e-6 * max(1.0, np.hypot(*(v - e)))]
+        fields = {"game": "pursuit", "region_of": self.evader, "value": float(_shoelace(cell)) if len(cell) else 0.0}
+        if np.any(heading):
+            fields["heading"] = _bearing(heading)
+        if len(cell) >= 3:
+            fields["region"] = [self._geodetic(np.vstack([cell, cell[:1]]))]
+        if len(on_line) >= 2:
+            fields["boundary"] = [self._geodetic(np.array(on_line[:2]))]
+        return fields
+
+    def _geodetic(self, points: np.ndarray) -> list[tuple[float, float]]:
+        lat, lon = self.map.to_geodetic(points[:, 0], points[:, 1])
+        return list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist()))
+
+
+def _shoelace(ring: np.ndarray) -> float:
+    x, y = ring[:, 0], ring[:, 1]
+    return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
+
+
 def _bearing(vector) -> float:
     """Degrees clockwise from north of an (east, north) vector, in [0, 360)."""
     b = math.degrees(math.atan2(vector[0], vector[1])) % 360.0

@@ -59,7 +59,9 @@ class FollowGuidance:
 
 
 class Direct:
-    """Unaided play. An attacker goes for its goal along the shortest path.
+    """Unaided play. An attacker goes for its goal along the shortest path;
+    an evader runs from the pursuers it sees, nearest first; a pursuer runs
+    straight at the evader.
     A defender marks the attacker as displayed, anticipating it: it takes
     the attacker ``lead`` seconds ahead on its course (read from its last two
     displayed positions) and keeps to the straight run from there to the
@@ -79,8 +81,13 @@ class Direct:
         self._course: dict[str, np.ndarray] = {}
 
     def decide(self, now, me, screen, situation):
-        if situation.team in ("attacker", "evader"):
+        if situation.team == "attacker":
             return situation.navigator.toward(situation.goal, me)
+        if situation.team == "evader":
+            return _flee(me, screen, situation)
+        if situation.team == "pursuer":
+            evader = _nearest_opponent(me, screen, situation)
+            return None if evader is None else _toward(me, evader.position)
         attacker = _nearest_opponent(me, screen, situation)
         if attacker is None:
             return None
@@ -252,6 +259,26 @@ def _nearest_opponent(me, screen: Screen, situation: Situation):
     if not seen:
         return None
     return min(seen, key=lambda q: float(np.hypot(*(q.position - me))))
+
+
+def _flee(me, screen: Screen, situation: Situation):
+    """Away from the displayed pursuers, each weighted by one over its
+    distance squared, turned along the field's edge when that is in the way."""
+    push = np.zeros(2)
+    for o in situation.opponents:
+        seen = screen.reports.get(o)
+        if seen is not None:
+            away = me - seen.position
+            push += away / max(float(away @ away), 1e-6)
+    if not push.any():
+        return None
+    area = situation.navigator.area
+    d = push / np.hypot(*push)
+    if not area.covers(shapely.Point(me + 3.0 * d)):
+        # Slide along the edge, to whichever side keeps away from the pursuers.
+        tangents = [np.array([-d[1], d[0]]), np.array([d[1], -d[0]])]
+        d = max(tangents, key=lambda t: float(t @ push) + (0.0 if area.covers(shapely.Point(me + 3.0 * t)) else -1e9))
+    return d
 
 
 def _around(me, direction, forbidden) -> np.ndarray | None:
