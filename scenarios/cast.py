@@ -15,7 +15,7 @@ import numpy as np
 import shapely
 
 from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve
-from agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor
+from agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor
 from agents.ground_station.referee import Contest, Referee
 from agents.human import behaviours
 from agents.human.agent import HumanAgent
@@ -154,7 +154,53 @@ class _PursuitGame:
         return _person(self.scenario, spec, profile, seed, situation, {}, "capture")
 
 
-GAMES = {"ctf": _CtfGame, "pursuit": _PursuitGame}
+class _ReachAvoidGame:
+    """The open-loop reach-avoid game of thesis ch. 4 played out: one attacker
+    must reach the targets in turn; the defenders win by capture or when
+    time runs out."""
+
+    def __init__(self, scenario: Scenario) -> None:
+        self.scenario = scenario
+        attackers = scenario.team("attacker")
+        if len(attackers) != 1:
+            raise ScenarioError(f"{scenario.source}: a reach-avoid game has one attacker")
+        self.attacker = attackers[0]
+        self.defenders = scenario.team("defender")
+        names = scenario.rules["targets"]
+        self.targets = [(n, scenario.map.region(n).geometry) for n in names]
+        self.goals = {"capture": self.targets[0][1], "return": self.targets[-1][1]}
+        xmin, ymin, xmax, ymax = scenario.map.bounds
+        self.radius = scenario.rules["capture_radius"] or 0.005 * max(xmax - xmin, ymax - ymin)
+        self._navigator = None
+
+    def referee(self) -> Referee:
+        contest = Contest(
+            runners=(self.attacker.id,), chasers=tuple(d.id for d in self.defenders), capture_radius=self.radius,
+            time_limit=self.scenario.time_limit, teams=("attacker", "defender"), targets=tuple(self.targets),
+        )  # fmt: skip
+        return Referee(self.scenario.name, self.scenario.map, contest)
+
+    def guidance(self, progress=None) -> GuidanceService:
+        s = self.scenario
+        xmin, ymin, xmax, ymax = s.map.bounds
+        advisor = ReachAvoidAdvisor(
+            s.map, attacker=self.attacker.id, defenders=[d.id for d in self.defenders],
+            targets=s.rules["targets"], speeds={a.id: a.speed for a in s.agents}, capture_radius=self.radius,
+            spacing=s.rules["spacing"] or max(xmax - xmin, ymax - ymin) / 200,
+        )  # fmt: skip
+        return GuidanceService(
+            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
+        )
+
+    def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
+        if self._navigator is None:
+            self._navigator = Navigator(self.scenario.map)
+        opponents = tuple(d.id for d in self.defenders) if spec.team == "attacker" else (self.attacker.id,)
+        situation = behaviours.Situation(spec.id, spec.team, opponents, self.goals["capture"], None, self._navigator)
+        return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture")
+
+
+GAMES = {"ctf": _CtfGame, "pursuit": _PursuitGame, "reach-avoid": _ReachAvoidGame}
 
 
 def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None) -> HumanAgent:

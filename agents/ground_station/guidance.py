@@ -239,6 +239,94 @@ class PursuitAdvisor:
         return list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist()))
 
 
+class ReachAvoidAdvisor:
+    """Open-loop reach-avoid guidance (thesis ch. 4) for one attacker against
+    many defenders: the attacker's phone shows its safe-reachable set for the
+    current stage, the planned path through the remaining targets as a line,
+    its first stretch as the heading, and go when a safe path exists;
+    ``value`` is the time to the last target along it. Solved on a grid of
+    ``spacing`` metres each time a fix moves any player."""
+
+    def __init__(self, game_map: Map, *, attacker: str, defenders, targets, speeds: dict, capture_radius: float,
+                 spacing: float) -> None:  # fmt: skip
+        from maps import rasterize
+
+        self.map = game_map
+        self.attacker, self.defenders = attacker, tuple(defenders)
+        raster = rasterize(game_map, spacing)
+        self.grid = raster.grid
+        self.free = raster.free
+        # Fixes that land on a blocked node go to the nearest point a spacing inside the free space.
+        self._inside = game_map.free_space.buffer(-spacing)
+        self.masks = [raster.masks[name] for name in targets]
+        self.speed = {agent: v * raster.speed for agent, v in speeds.items()}
+        self.capture_radius = capture_radius
+        self.stage = 0
+        self._last: tuple[tuple, dict] | None = None
+
+    def state(self, message: GameState) -> None:
+        self.stage = 0 if message.flag_holder is None else min(1, len(self.masks) - 1)
+
+    def __call__(self, agent: str, fixes: _Fixes, now: float) -> dict:
+        latest = fixes.latest
+        if agent != self.attacker:
+            return {"game": "reach-avoid"}
+        if any(a not in latest for a in (self.attacker, *self.defenders)):
+            return {"game": "reach-avoid", "note": "waiting for every player's fixes"}
+        points = [latest[a][0] for a in (self.attacker, *self.defenders)]
+        key = (self.stage, np.array(points).tobytes())
+        if self._last is None or self._last[0] != key:
+            self._last = (key, self._answer(points))
+        return self._last[1]
+
+    def _answer(self, points) -> dict:
+        from solvers.openloop import Defender, solve_openloop
+
+        a, *others = (self._placeable(p) for p in points)
+        defenders = [Defender(tuple(p), self.speed[d], self.capture_radius) for d, p in zip(self.defenders, others)]
+        masks = self.masks[self.stage:]
+        try:
+            solution = solve_openloop(self.grid, tuple(a), [self.speed[self.attacker]] * len(masks), masks, defenders)
+        except InputError as exc:
+            return {"game": "reach-avoid", "note": str(exc)[:200]}
+        fields = {"game": "reach-avoid", "region_of": self.attacker, "go": solution.reached}
+        fields["region"] = self._geodetic_rings(_mask_rings(self.grid, solution.stages[0].safe))
+        if solution.path is not None and len(solution.path.points) > 1:
+            path = solution.path.points
+            along = np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])
+            aim = path[min(int(np.searchsorted(along, 3.0 * max(self.grid.spacing))), len(path) - 1)]
+            if np.hypot(*(aim - a)) > 1e-9:
+                fields["heading"] = _bearing(aim - a)
+            fields["boundary"] = self._geodetic_rings([path[:: max(1, len(path) // 2000)]])
+            fields["value"] = float(solution.value)
+        return fields
+
+    def _placeable(self, p: np.ndarray) -> np.ndarray:
+        p = np.clip(p, self.grid.lo, self.grid.hi)
+        if self.free[self.grid.nearest_index(p)]:
+            return p
+        return np.asarray(shapely.ops.nearest_points(self._inside, shapely.Point(p))[0].coords[0])
+
+    def _geodetic_rings(self, rings) -> list:
+        out = []
+        for ring in rings[:64]:
+            ring = np.asarray(ring)[:MAX_RING_POINTS]
+            lat, lon = self.map.to_geodetic(ring[:, 0], ring[:, 1])
+            out.append(list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist())))
+        return out
+
+
+def _mask_rings(grid, mask: np.ndarray) -> list[np.ndarray]:
+    """The outlines of a set of grid nodes, traced halfway to the nodes outside."""
+    import contourpy
+
+    if not mask.any():
+        return []
+    x, y = grid.axes()
+    lines = contourpy.contour_generator(x, y, mask.T.astype(float), line_type="Separate").lines(0.5)
+    return sorted((line for line in lines if len(line) >= 4), key=len, reverse=True)
+
+
 def _shoelace(ring: np.ndarray) -> float:
     x, y = ring[:, 0], ring[:, 1]
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
