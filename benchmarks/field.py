@@ -42,7 +42,7 @@ def phone(args) -> None:
     from bus.messages import Fix, Guidance
     from bus.zenoh_session import ZenohSession, config
 
-    session = ZenohSession(args.phone, config(connect=[args.connect]))
+    session = ZenohSession(args.phone, config(connect=[args.connect], listen=[], mode=args.mode))
     sent: dict[float, float] = {}
     latencies: list[float] = []
     echo_rtts: list[float] = []
@@ -84,7 +84,7 @@ def phone(args) -> None:
                                           "echo": echo_rtts}))  # fmt: skip
 
 
-def latency(n: int, duration: float) -> dict:
+def latency(n: int, duration: float, mode: str = "peer") -> dict:
     from agents.ground_station.guidance import GuidanceService
     from bus import keys
     from bus.codec import Inbox
@@ -96,9 +96,10 @@ def latency(n: int, duration: float) -> dict:
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
     ids = [f"p{k}" for k in range(n)]
-    session = ZenohSession("gs", config(listen=[endpoint]))
+    hub = "router" if mode == "client" else "peer"
+    session = ZenohSession("gs", config(listen=[endpoint], mode=hub))
     # The bare-Zenoh peer: echo every ping straight back.
-    echo = ZenohSession("echo", config(connect=[endpoint]))
+    echo = ZenohSession("echo", config(connect=[endpoint], listen=[] if mode == "client" else None, mode=mode))
     echo.subscribe("bench/echo/*/out", lambda k, p, s: echo.put(k.rsplit("/", 1)[0] + "/back", p, reliable=False))
     service = GuidanceService(GAME, load_map("field-50"), ids, rate=10.0)
     received: dict[str, set] = {pid: set() for pid in ids}
@@ -114,7 +115,7 @@ def latency(n: int, duration: float) -> dict:
     with tempfile.TemporaryDirectory() as tmp:
         procs = [
             subprocess.Popen([sys.executable, __file__, "--phone", pid, "--connect", endpoint, "--duration", str(duration),
-                              "--warmup", "3", "--out", f"{tmp}/{pid}.json"])  # fmt: skip
+                              "--warmup", "3", "--out", f"{tmp}/{pid}.json", "--mode", mode])  # fmt: skip
             for pid in ids
         ]
 
@@ -122,11 +123,9 @@ def latency(n: int, duration: float) -> dict:
             task = asyncio.create_task(run_peer([service], session, GAME))
             await asyncio.sleep(duration + 12.0)
             task.cancel()
+            await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
 
-        try:
-            asyncio.run(serve())
-        except asyncio.CancelledError:
-            pass
+        asyncio.run(serve())
         for p in procs:
             p.wait(timeout=60)
         results = [json.loads(Path(f"{tmp}/{pid}.json").read_text()) for pid in ids]
@@ -167,6 +166,8 @@ def main() -> None:
     parser.add_argument("--games", type=int, default=5)
     parser.add_argument("--simulate-only", action="store_true")
     parser.add_argument("--latency-only", action="store_true")
+    parser.add_argument("--mode", choices=("peer", "client"), default="peer",
+                        help="phones as Zenoh peers (a full mesh) or as clients of the ground station as a router")
     parser.add_argument("--phone", help=argparse.SUPPRESS)
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--warmup", type=float, default=3.0, help=argparse.SUPPRESS)
@@ -182,8 +183,8 @@ def main() -> None:
     if not args.simulate_only:
         print("fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)")
         for n in args.phones:
-            r = latency(n, args.duration)
-            print(f"  {n:3d} phones: {r['fixes']} fixes, {r['lost']} lost, {r['unanswered']} unanswered; latency p50 {r['p50_ms']:.2f} ms, "
+            r = latency(n, args.duration, args.mode)
+            print(f"  {n:3d} phones ({args.mode}s): {r['fixes']} fixes, {r['lost']} lost, {r['unanswered']} unanswered; latency p50 {r['p50_ms']:.2f} ms, "
                   f"p99 {r['p99_ms']:.2f} ms; bare Zenoh echo p50 {r['echo_p50_ms']:.2f} ms, p99 {r['echo_p99_ms']:.2f} ms "
                   f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)")  # fmt: skip
 

@@ -65,7 +65,7 @@ def free_port() -> int:
 def peer_command(role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path) -> list[str]:
     return [
         sys.executable, "-m", "bearcat", "peer", role, "--scenario", scenario_ref, "--id", agent,
-        "--connect", endpoint, "--seed", str(seed), "--netem", netem, "--out", str(out),
+        "--connect", endpoint, "--mode", "client", "--seed", str(seed), "--netem", netem, "--out", str(out),
     ]  # fmt: skip
 
 
@@ -77,7 +77,10 @@ def launch(
     (out / "peers").mkdir(exist_ok=True)
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
-    session = ZenohSession("launcher", config(listen=[endpoint]))
+    # The launcher is the hub: a router every peer joins as a client. A mesh
+    # of peers costs a link per pair, and with dozens of peers on a small
+    # host it delays and drops fixes (benchmarks/field.py, --mode).
+    session = ZenohSession("launcher", config(listen=[endpoint], mode="router"))
     # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
     (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
     record = EventLog(out / "events.jsonl")

@@ -71,15 +71,23 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
 
         return handle, arrived
 
+    def soon(fn, *args) -> None:
+        """Hand a sample from Zenoh's thread to the loop; samples that arrive
+        while the peer shuts down are dropped."""
+        try:
+            loop.call_soon_threadsafe(fn, *args)
+        except RuntimeError:  # the loop is closed
+            pass
+
     handles = {}
     for agent in agents:
         handle, arrived = handler(agent, Inbox(agent.name))
         handles[agent.name] = handle
         for expr in agent.subscriptions:
-            session.subscribe(expr, lambda k, p, s, arrived=arrived: loop.call_soon_threadsafe(arrived, k, p, s))
+            session.subscribe(expr, lambda k, p, s, arrived=arrived: soon(arrived, k, p, s))
         for expr in agent.watches:
             session.subscribe_liveliness(
-                expr, lambda k, alive, a=agent: loop.call_soon_threadsafe(lambda: publish(a.peer(k, alive, clock.now())))
+                expr, lambda k, alive, a=agent: soon(lambda: publish(a.peer(k, alive, clock.now())))
             )
     for agent in agents:
         session.declare_token(keys.alive(game, agent.role, agent.name))
@@ -121,7 +129,7 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
     return why["reason"]
 
 
-def start_peer(role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None) -> str:
+def start_peer(role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None, mode="peer") -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``)."""
     import shapely
 
@@ -145,7 +153,9 @@ def start_peer(role: str, scenario, agent: str, *, connect, listen, seed: int, n
     record = EventLog(None if out is None else f"{out}/peers/{name}.jsonl")
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
-    session = ZenohSession(name, config(listen=listen, connect=connect))
+    if mode == "client" and listen is None:
+        listen = []  # a client does not listen
+    session = ZenohSession(name, config(listen=listen, connect=connect, mode=mode))
     if zones is not None:
         # Dead zones need every peer's position: in simulation the truth tells it.
         def on_truth(key, payload, sender):

@@ -44,7 +44,9 @@ def register(subparsers) -> None:
     peer.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                       help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
     peer.add_argument("--listen", action="append", metavar="ENDPOINT",
-                      help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0)")
+                      help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0; clients do not listen)")
+    peer.add_argument("--mode", choices=("peer", "client"), default="peer",
+                      help="Zenoh mode: peer (default) or client of the router it connects to (what bearcat run uses)")
     peer.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
@@ -103,7 +105,7 @@ def run_peer(args) -> int:
 
     scenario = load_scenario(args.scenario)
     reason = start_peer(
-        args.role, scenario, args.id, connect=args.connect, listen=args.listen,
+        args.role, scenario, args.id, connect=args.connect, listen=args.listen, mode=args.mode,
         seed=scenario.seed if args.seed is None else args.seed, netem=args.netem or scenario.netem, out=args.out,
     )  # fmt: skip
     print(f"peer {args.id if args.role == 'walker' else 'gs'}: {reason}", flush=True)
