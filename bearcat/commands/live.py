@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-import sys
 from pathlib import Path
 
+from bearcat.progress import solve_bars
 from scenarios.schema import load_scenario
 
 
@@ -64,7 +64,7 @@ def run_live(args) -> int:
     load_profile(netem)
     out = args.out or Path("runs") / f"{scenario.name}-{seed}"
     # Solve (or load) what the ground station needs here, with progress, so no peer waits on it.
-    cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=_progress())
+    cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=solve_bars())
     outcome = launch(scenario, _reference(args.scenario), out, seed=seed, netem=netem,
                      say=lambda text: print(text, flush=True))  # fmt: skip
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
@@ -116,19 +116,3 @@ def _reference(text: str) -> str:
     """How child processes find the scenario: built-in names as they are, files by absolute path."""
     path = Path(text)
     return str(path.resolve()) if path.exists() else text
-
-
-def _progress():
-    from tqdm import tqdm
-
-    bars: dict = {}
-
-    def update(name, t, horizon, change):
-        bar = bars.get(name)
-        if bar is None:
-            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"solving {name} set", unit="s", file=sys.stderr)
-        bar.update(round(t - bar.n, 2))
-        if t >= horizon:
-            bar.close()
-
-    return update

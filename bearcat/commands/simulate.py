@@ -17,6 +17,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from agents.ground_station.recording import finish_run
+from bearcat.progress import solve_bars
 from scenarios.schema import list_scenarios, load_scenario
 from scenarios.simulate import simulate
 
@@ -38,27 +39,17 @@ def register(subparsers) -> None:
 
 
 def run(args) -> int:
-    from tqdm import tqdm
-
     scenario = load_scenario(args.scenario)
     if args.trials < 1:
         print("bearcat: error: --trials must be at least 1", file=sys.stderr)
         return 2
     first = scenario.seed if args.seed is None else args.seed
     tally: Counter = Counter()
-    bars: dict = {}
-
-    def solving(name, t, horizon, change):
-        bar = bars.get(name)
-        if bar is None:
-            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"solving {name} set", unit="s", file=sys.stderr)
-        bar.update(round(t - bar.n, 2))
+    solving = solve_bars()
 
     for seed in range(first, first + args.trials):
         events = None if args.out is None else args.out / f"seed-{seed}" / "events.jsonl"
         outcome = simulate(scenario, seed=seed, netem=args.netem, events=events, ctf_progress=solving)
-        for bar in bars.values():
-            bar.close()
         record = asdict(outcome)
         if events is not None:
             (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")
