@@ -49,9 +49,14 @@ class Cast:
         return [a for a in (self.referee, self.guidance) if a is not None] + list(self.people.values())
 
 
-def cast(scenario: Scenario, profile: Profile, seed: int, *, people=None, ground: bool = True, ctf_progress=None) -> Cast:
+def cast(
+    scenario: Scenario, profile: Profile, seed: int, *, people=None, ground: bool = True, ctf_progress=None,
+    judge: str = "truth",
+) -> Cast:
     """The agents of ``scenario``: the people named in ``people`` (default all)
-    and, with ``ground``, the ground station's referee and guidance service."""
+    and, with ``ground``, the ground station's referee (judging on ``judge``:
+    the simulation's truth, or the fixes when the players are real) and
+    guidance service."""
     if scenario.game not in GAMES:
         raise ScenarioError(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
@@ -61,7 +66,9 @@ def cast(scenario: Scenario, profile: Profile, seed: int, *, people=None, ground
     crowd = {a: game.person(scenario.agent(a), profile, seed) for a in chosen}
     if not ground:
         return Cast(crowd)
-    return Cast(crowd, game.referee(), game.guidance(ctf_progress))
+    if judge not in ("truth", "fixes"):
+        raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
+    return Cast(crowd, game.referee(on_truth=judge == "truth"), game.guidance(ctf_progress))
 
 
 class _CtfGame:
@@ -85,14 +92,14 @@ class _CtfGame:
         self.goals = {"capture": self.flag, "return": self.home}
         self._navigator = None
 
-    def referee(self) -> Referee:
+    def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
             runners=(self.attacker.id,), chasers=(self.defender.id,), capture_radius=self.rules.capture_radius,
             time_limit=self.scenario.time_limit, teams=("attacker", "defender"),
             targets=(("home", self.home),) if self.flag_taken else (("flag", self.flag), ("home", self.home)),
             forbidden=(("flag", self.flag), ("return", self.home)), flag_taken=self.flag_taken,
         )  # fmt: skip
-        return Referee(self.scenario.name, self.scenario.map, contest)
+        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
@@ -131,13 +138,13 @@ class _PursuitGame:
         self.pursuers = scenario.team("pursuer")
         self._navigator = None
 
-    def referee(self) -> Referee:
+    def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
             runners=(self.evader.id,), chasers=tuple(p.id for p in self.pursuers),
             capture_radius=self.scenario.rules["capture_radius"], time_limit=self.scenario.time_limit,
             teams=("evader", "pursuer"), lasting_wins=True,
         )  # fmt: skip
-        return Referee(self.scenario.name, self.scenario.map, contest)
+        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
@@ -173,12 +180,12 @@ class _ReachAvoidGame:
         self.radius = scenario.rules["capture_radius"] or 0.005 * max(xmax - xmin, ymax - ymin)
         self._navigator = None
 
-    def referee(self) -> Referee:
+    def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
             runners=(self.attacker.id,), chasers=tuple(d.id for d in self.defenders), capture_radius=self.radius,
             time_limit=self.scenario.time_limit, teams=("attacker", "defender"), targets=tuple(self.targets),
         )  # fmt: skip
-        return Referee(self.scenario.name, self.scenario.map, contest)
+        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario

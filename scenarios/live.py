@@ -129,7 +129,9 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
     return why["reason"]
 
 
-def start_peer(role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None, mode="peer") -> str:
+def start_peer(
+    role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None, mode="peer", judge="truth"
+) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``)."""
     import shapely
 
@@ -141,7 +143,7 @@ def start_peer(role: str, scenario, agent: str, *, connect, listen, seed: int, n
 
     profile = load_profile(netem)
     if role == "ground-station":
-        players = cast(scenario, profile, seed, people=[], ground=True)
+        players = cast(scenario, profile, seed, people=[], ground=True, judge=judge)
         agents, name = [players.referee, players.guidance], players.guidance.name
     elif role == "walker":
         if agent not in scenario.ids:

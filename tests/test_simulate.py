@@ -204,3 +204,11 @@ def test_aided_pursuers_capture_the_evader_and_see_their_boundary(tmp_path):
     areas = [m["value"] for m in answered if m["agent"] == "pursuer-1"]
     assert areas[0] > 1000 and areas[-1] < 0.2 * areas[0]
     assert all(m["boundary"] for m in answered[len(answered) // 2:])
+
+
+def test_against_real_players_the_referee_judges_on_fixes_and_says_so():
+    ref, field = referee()
+    fixes_ref = Referee("g", field, ref.contest, on_truth=False)
+    assert keys.every("g", "fix") in fixes_ref.subscriptions and keys.every("g", "truth") not in fixes_ref.subscriptions
+    (send,) = fixes_ref.start(0.0)
+    assert send.message.judged_on == "fixes"

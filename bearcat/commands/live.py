@@ -47,6 +47,8 @@ def register(subparsers) -> None:
                       help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0; clients do not listen)")
     peer.add_argument("--mode", choices=("peer", "client"), default="peer",
                       help="Zenoh mode: peer (default) or client of the router it connects to (what bearcat run uses)")
+    peer.add_argument("--judge", choices=("truth", "fixes"), default="truth",
+                      help="what the referee judges on: the simulation's truth (default), or the fixes, for real players")
     peer.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
@@ -105,7 +107,7 @@ def run_peer(args) -> int:
 
     scenario = load_scenario(args.scenario)
     reason = start_peer(
-        args.role, scenario, args.id, connect=args.connect, listen=args.listen, mode=args.mode,
+        args.role, scenario, args.id, connect=args.connect, listen=args.listen, mode=args.mode, judge=args.judge,
         seed=scenario.seed if args.seed is None else args.seed, netem=args.netem or scenario.netem, out=args.out,
     )  # fmt: skip
     print(f"peer {args.id if args.role == 'walker' else 'gs'}: {reason}", flush=True)
