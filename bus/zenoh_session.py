@@ -119,6 +119,27 @@ class ZenohSession:
         )
         self._declared.append(subscriber)
 
+    def serve(self, key: str, reply) -> None:
+        """Answer queries on ``key`` with the bytes ``reply()`` returns (the
+        ground station serves its map and scenario this way)."""
+        self._check_open()
+
+        def on_query(query: zenoh.Query) -> None:
+            try:
+                query.reply(key, reply())
+            except Exception:  # noqa: BLE001
+                self._callback_failed(key)
+
+        self._declared.append(self._session.declare_queryable(key, zenoh.handlers.Callback(on_query)))
+
+    def fetch(self, key: str, timeout: float = 2.0) -> bytes | None:
+        """The first answer to a query on ``key``, None if nobody answers in time."""
+        self._check_open()
+        for reply in self._session.get(key, timeout=timeout):
+            if reply.ok is not None:
+                return reply.ok.payload.to_bytes()
+        return None
+
     def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
         self._check_open()
         replies = self._session.liveliness().get(key_expr, timeout=timeout)

@@ -158,6 +158,13 @@ def start_peer(
     if mode == "client" and listen is None:
         listen = []  # a client does not listen
     session = ZenohSession(name, config(listen=listen, connect=connect, mode=mode))
+    if role == "ground-station":
+        # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.
+        from maps.geojson import dumps
+
+        geojson = dumps(scenario.map, units="metres").encode()
+        session.serve(keys.map_query(scenario.name), lambda: geojson)
+        session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
     if zones is not None:
         # Dead zones need every peer's position: in simulation the truth tells it.
         def on_truth(key, payload, sender):
@@ -177,6 +184,30 @@ def start_peer(
 
 
 GROUND_PEERS = ("gs", "referee", "launcher")
+
+
+def fetch_scenario(game: str, connect, timeout: float = 10.0):
+    """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``)."""
+    import time
+
+    from bus.errors import BusError
+    from bus.zenoh_session import ZenohSession, config
+    from maps.geojson import parse_geojson
+    from scenarios.schema import parse_scenario
+
+    session = ZenohSession(f"fetch-{int(time.time() * 1000) % 10**9}", config(connect=connect))
+    try:
+        end = time.monotonic() + timeout
+        text = geojson = None
+        while time.monotonic() < end and (text is None or geojson is None):
+            text = text or session.fetch(keys.scenario_query(game), timeout=1.0)
+            geojson = geojson or session.fetch(keys.map_query(game), timeout=1.0)
+    finally:
+        session.close()
+    if text is None or geojson is None:
+        raise BusError(f"no ground station of game {game!r} answered at {', '.join(connect) or 'the default endpoints'}")
+    game_map = parse_geojson(geojson.decode(), source=f"the map of game {game}", default_name=game)
+    return parse_scenario(text.decode(), source=f"the scenario of game {game}", game_map=game_map)
 
 
 def _read_keys(behaviour) -> None:

@@ -96,6 +96,7 @@ class Scenario:
     guidance_rate: float
     agents: tuple[AgentSpec, ...]
     description: str = ""
+    text: str = ""  # the TOML it was read from, served to peers that ask
     dead_zones: tuple[tuple[tuple[float, float], ...], ...] = ()
 
     def team(self, name: str) -> list[AgentSpec]:
@@ -133,7 +134,9 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
     return parse_scenario(path.read_text(encoding="utf-8"), source=str(path))
 
 
-def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
+def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | None = None) -> Scenario:
+    """The scenario in ``text``; ``game_map``, if given, stands for the map it
+    names (a peer that fetched both from the ground station)."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -143,10 +146,11 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
     head = c.table(data, "scenario", "")
     c.only(head, {"name", "description", "map", "game", "time_limit", "netem", "seed", "dead_zones"}, "scenario")
     game = c.choice(head, "game", GAMES, "scenario")
-    try:
-        game_map = load_map(c.text(head, "map", "scenario"))
-    except MapError as exc:
-        raise ScenarioError(f"{source}: scenario.map: {exc}") from None
+    if game_map is None:
+        try:
+            game_map = load_map(c.text(head, "map", "scenario"))
+        except MapError as exc:
+            raise ScenarioError(f"{source}: scenario.map: {exc}") from None
     netem = head.get("netem", "ideal")
     try:
         load_profile(netem)
@@ -186,6 +190,7 @@ def parse_scenario(text: str, source: str = "<scenario>") -> Scenario:
         guidance_rate=c.number(guidance, "rate", "guidance", default=10.0, positive=True),
         agents=agents,
         description=str(head.get("description", "")),
+        text=text,
         dead_zones=tuple(zones),
     )
 

@@ -132,3 +132,20 @@ def test_ctrl_c_stops_every_peer(tmp_path, env):
     outcome = json.loads((out / "outcome.json").read_text())
     assert "interrupted" in outcome["reason"] or "stopped" in outcome["reason"], outcome
     assert wait_for(lambda: peers_of(path) == [], 10)
+
+
+def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path, env):
+    from scenarios.live import fetch_scenario
+
+    launcher, out, path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+    try:
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
+        scenario = fetch_scenario("test-game", [endpoint])
+        assert scenario.name == "test-game" and scenario.map.bounds == (0.0, 0.0, 50.0, 50.0)
+        assert scenario.ids == ["attacker", "defender"] and scenario.map.region("home")
+        launcher.send_signal(signal.SIGINT)
+        launcher.communicate(timeout=60)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()

@@ -39,7 +39,8 @@ def register(subparsers) -> None:
         description="Start one peer of a scenario: the ground station (referee and guidance) or one walker.",
     )
     peer.add_argument("role", choices=("ground-station", "walker"))
-    peer.add_argument("--scenario", required=True, metavar="SCENARIO", help="built-in scenario name or TOML file")
+    peer.add_argument("--scenario", required=True, metavar="SCENARIO",
+                      help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station")
     peer.add_argument("--id", default="gs", metavar="ID", help="the walker's agent id (ignored for the ground station)")
     peer.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                       help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
@@ -103,9 +104,12 @@ def _open_viewer(rrd: Path, *extra: str) -> int:
 
 
 def run_peer(args) -> int:
-    from scenarios.live import start_peer
+    from scenarios.live import fetch_scenario, start_peer
 
-    scenario = load_scenario(args.scenario)
+    if args.scenario.startswith("zenoh:"):
+        scenario = fetch_scenario(args.scenario[len("zenoh:"):], args.connect)
+    else:
+        scenario = load_scenario(args.scenario)
     reason = start_peer(
         args.role, scenario, args.id, connect=args.connect, listen=args.listen, mode=args.mode, judge=args.judge,
         seed=scenario.seed if args.seed is None else args.seed, netem=args.netem or scenario.netem, out=args.out,
