@@ -7,7 +7,8 @@ import sys
 
 def solve_bars():
     """A ``progress(name, t, horizon, change)`` callback drawing one bar per
-    solved set, in seconds of game time, closed when the set is done."""
+    solved set, in seconds of game time; ``progress.close()`` closes the bars
+    of sets that converged before their horizon."""
     from tqdm import tqdm
 
     bars: dict = {}
@@ -15,9 +16,12 @@ def solve_bars():
     def update(name, t, horizon, change):
         bar = bars.get(name)
         if bar is None:
-            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"solving {name} set", unit="s", file=sys.stderr)
+            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"solving the {name} set", file=sys.stderr,
+                                    bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s of game time "
+                                    "[{elapsed}]")  # fmt: skip
         bar.update(round(t - bar.n, 2))
         if t >= horizon - 1e-9:
             bar.close()
 
+    update.close = lambda: [bar.close() for bar in bars.values()]
     return update

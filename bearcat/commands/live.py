@@ -67,7 +67,9 @@ def run_live(args) -> int:
     load_profile(netem)
     out = args.out or Path("runs") / f"{scenario.name}-{seed}"
     # Solve (or load) what the ground station needs here, with progress, so no peer waits on it.
-    cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=solve_bars())
+    progress = solve_bars()
+    cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=progress)
+    progress.close()
     outcome = launch(scenario, _reference(args.scenario), out, seed=seed, netem=netem,
                      say=lambda text: print(text, flush=True))  # fmt: skip
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"

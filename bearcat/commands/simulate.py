@@ -50,6 +50,7 @@ def run(args) -> int:
     for seed in range(first, first + args.trials):
         events = None if args.out is None else args.out / f"seed-{seed}" / "events.jsonl"
         outcome = simulate(scenario, seed=seed, netem=args.netem, events=events, ctf_progress=solving)
+        solving.close()
         record = asdict(outcome)
         if events is not None:
             (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")
