@@ -212,3 +212,14 @@ def test_against_real_players_the_referee_judges_on_fixes_and_says_so():
     assert keys.every("g", "fix") in fixes_ref.subscriptions and keys.every("g", "truth") not in fixes_ref.subscriptions
     (send,) = fixes_ref.start(0.0)
     assert send.message.judged_on == "fixes"
+
+
+def test_keys_steer_a_keyboard_walker_and_space_stops_it():
+    from agents.human.behaviours import Keyboard
+
+    keyboard = Keyboard()
+    assert keyboard.decide(0.0, None, None, None) is None
+    assert keyboard.press("up") and keyboard.decide(0.0, None, None, None).tolist() == [0.0, 1.0]
+    assert keyboard.press("a") and keyboard.decide(0.0, None, None, None).tolist() == [-1.0, 0.0]
+    assert not keyboard.press("z") and keyboard.decide(0.0, None, None, None).tolist() == [-1.0, 0.0]
+    assert keyboard.press("space") and keyboard.decide(0.0, None, None, None) is None

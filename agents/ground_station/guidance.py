@@ -245,7 +245,7 @@ class ReachAvoidAdvisor:
     current stage, the planned path through the remaining targets as a line,
     its first stretch as the heading, and go when a safe path exists;
     ``value`` is the time to the last target along it. Solved on a grid of
-    ``spacing`` metres each time a fix moves any player."""
+    ``spacing`` metres on each new fix of the attacker."""
 
     def __init__(self, game_map: Map, *, attacker: str, defenders, targets, speeds: dict, capture_radius: float,
                  spacing: float) -> None:  # fmt: skip
@@ -274,7 +274,11 @@ class ReachAvoidAdvisor:
         if any(a not in latest for a in (self.attacker, *self.defenders)):
             return {"game": "reach-avoid", "note": "waiting for every player's fixes"}
         points = [latest[a][0] for a in (self.attacker, *self.defenders)]
-        key = (self.stage, np.array(points).tobytes())
+        # A solve takes tens of milliseconds: redo it when the stage changes or
+        # the attacker's own fix moves (once a fix period), taking the
+        # defenders as last reported then; a defender's move shows at the
+        # attacker's next fix.
+        key = (self.stage, points[0].tobytes())
         if self._last is None or self._last[0] != key:
             self._last = (key, self._answer(points))
         return self._last[1]
