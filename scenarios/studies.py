@@ -31,21 +31,50 @@ def study_tasks(study: str, trials: int, seed: int, profiles=None) -> list[dict]
 
 
 def play_task(task: dict) -> dict:
-    """One game of a study; the result row."""
+    """One game of a study; the result row. ``true_value`` is the solver's
+    value at the true positions when the attacker went (negative: the window
+    its display showed was really there)."""
+    import tempfile
     from dataclasses import asdict
 
     from scenarios.schema import load_scenario
     from scenarios.simulate import simulate
 
-    outcome = simulate(load_scenario(task["scenario"]), seed=task["seed"], netem=task["netem"])
-    row = {k: v for k, v in asdict(outcome).items() if k in ("winner", "reason", "elapsed", "netem", "notes")}
-    went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
-    return {**row, "key": task["key"], "scenario": task["scenario"], "seed": task["seed"], "went_at": went}
+    scenario = load_scenario(task["scenario"])
+    with tempfile.TemporaryDirectory() as tmp:
+        events = f"{tmp}/events.jsonl"
+        outcome = simulate(scenario, seed=task["seed"], netem=task["netem"], events=events)
+        row = {k: v for k, v in asdict(outcome).items() if k in ("winner", "reason", "elapsed", "netem", "notes")}
+        went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
+        true_value = None if went is None else _true_value(scenario, events, went)
+    return {**row, "key": task["key"], "scenario": task["scenario"], "seed": task["seed"], "went_at": went,
+            "true_value": true_value}  # fmt: skip
+
+
+def _true_value(scenario, events: str, t: float) -> float | None:
+    """The capture-the-flag value at the players' true positions at time ``t``."""
+    from agents.ground_station.recorder import read_events
+    from scenarios.cast import _CtfGame
+
+    if scenario.game != "ctf":
+        return None
+    where = {}
+    for e in read_events(events):
+        if e["event"] == "sent" and e["message"].get("type") == "truth" and e["t"] <= t + 1e-9:
+            m = e["message"]
+            where[m["agent"]] = scenario.map.to_local(m["lat"], m["lon"])
+    game = _CtfGame(scenario)
+    if game.attacker.id not in where or game.defender.id not in where:
+        return None
+    advisor = game.guidance().advisor
+    return round(float(advisor.solved.evaluate(where[game.attacker.id], where[game.defender.id], game.phase).value), 3)
 
 
 def summarise(results) -> list[dict]:
     """Per scenario and profile: games, attacker wins, goes (the attacker
-    committed), goes that won, false goes (committed, then lost), and rates."""
+    committed), goes that won, false goes (committed, then lost), and rates;
+    goes whose window was really there (the attacker's true position wins
+    against the defender's) and how many of those the attacker won."""
     groups = defaultdict(list)
     for r in results:
         groups[(r["scenario"], r["netem"])].append(r)
@@ -54,11 +83,13 @@ def summarise(results) -> list[dict]:
         wins = sum(g["winner"] == "attacker" for g in games)
         went = [g for g in games if g["went_at"] is not None]
         good = sum(g["winner"] == "attacker" for g in went)
+        real = [g for g in went if g.get("true_value") is not None and g["true_value"] <= 0]
         rows.append({
             "scenario": scenario, "netem": netem, "games": len(games), "attacker_wins": wins,
             "attacker_win_rate": round(wins / len(games), 3), "goes": len(went), "goes_won": good,
             "false_goes": len(went) - good, "false_go_rate": round((len(went) - good) / len(went), 3) if went else None,
             "median_go_time": _median([g["went_at"] for g in went]),
+            "goes_really_open": len(real), "really_open_won": sum(g["winner"] == "attacker" for g in real),
         })  # fmt: skip
     return rows
 

@@ -54,10 +54,12 @@ def run(args) -> int:
                             on_result=lambda r: bar.update(1))  # fmt: skip
     rows = summarise(results.values())
     (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
-    print(f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}")
+    print(f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}"
+          f"{'really open':>13}{'of them won':>13}")  # fmt: skip
     for r in rows:
         rate = "" if r["false_go_rate"] is None else f" ({100 * r['false_go_rate']:.0f}%)"
         print(f"{r['scenario']:<26}{r['netem'] or 'its own':<13}{r['games']:>6}"
-              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate}")  # fmt: skip
+              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate:<6}"
+              f"{r['goes_really_open']:>13}{r['really_open_won']:>13}")  # fmt: skip
     print(f"per-game results in {out}/results.jsonl; replay one with bearcat simulate SCENARIO --seed S --netem P")
     return 0
