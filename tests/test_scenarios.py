@@ -58,3 +58,20 @@ def test_an_unknown_scenario_is_named(tmp_path):
     bad.write_text("[scenario\\n")
     with pytest.raises(ScenarioError, match="bad.toml is not valid TOML"):
         load_scenario(bad)
+
+
+def test_study_summaries_count_goes_false_goes_and_real_windows():
+    from scenarios.studies import study_tasks, summarise
+
+    rows = [
+        {"scenario": "s", "netem": "wifi", "winner": "attacker", "went_at": 3.0, "true_value": -0.5},
+        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": 4.0, "true_value": 0.7},
+        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": 5.0, "true_value": -0.1},
+        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": None, "true_value": None},
+    ]
+    (row,) = summarise(rows)
+    assert (row["games"], row["attacker_wins"], row["goes"], row["false_goes"]) == (4, 1, 3, 2)
+    assert (row["goes_really_open"], row["really_open_won"], row["median_go_time"]) == (2, 1, 4.0)
+    assert row["false_go_rate"] == pytest.approx(2 / 3, abs=1e-3)
+    tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])
+    assert [t["seed"] for t in tasks] == [10, 11, 12] * 2 and len({t["key"] for t in tasks}) == 6
