@@ -20,6 +20,7 @@ from bearcat.commands import maps as maps_command
 from bearcat.commands import simulate as simulate_command
 from bearcat.commands import solve as solve_command
 from bearcat.commands import study as study_command
+from bearcat.commands import vehicle as vehicle_command
 from bus.errors import BusError
 from maps.errors import MapError
 from netem.profiles import ProfileError
@@ -39,7 +40,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"bearcat {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log more (repeat for debug)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for module in (maps_command, solve_command, ctf_command, experiment_command, simulate_command, live_command, study_command):
+    for module in (maps_command, solve_command, ctf_command, experiment_command, simulate_command, live_command, study_command,
+                   vehicle_command):
         module.register(subparsers)
     return parser
 

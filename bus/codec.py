@@ -16,7 +16,7 @@ import msgspec
 
 from bus import keys
 from bus.errors import BusError
-from bus.messages import AnyMessage, Control, Fix, GameState, Guidance, Message, Truth, UavTask
+from bus.messages import AnyMessage, Control, Detection, Fix, GameState, Guidance, Message, Truth, UavTask
 
 log = logging.getLogger(__name__)
 
@@ -32,6 +32,7 @@ _FOR_KIND = {
     "state": (GameState, None),
     "control": (Control, None),
     "uav-task": (UavTask, "uav"),
+    "detection": (Detection, "uav"),
 }
 
 

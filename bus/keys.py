@@ -6,6 +6,7 @@
     bearcat/{game}/guidance/{agent}     guidance for one agent
     bearcat/{game}/state                game state from the referee
     bearcat/{game}/uav/{uav}/task       search target or waypoint for a UAV
+    bearcat/{game}/uav/{uav}/detection  an agent the UAV's camera saw
     bearcat/{game}/truth/{agent}        simulation only
     bearcat/{game}/control              start / pause / stop
     bearcat/{game}/alive/{role}/{agent} liveliness tokens
@@ -34,6 +35,7 @@ _KINDS = {
     "guidance": ("guidance", "{}"),
     "state": ("state",),
     "uav-task": ("uav", "{}", "task"),
+    "detection": ("uav", "{}", "detection"),
     "truth": ("truth", "{}"),
     "control": ("control",),
     "alive": ("alive", "{}", "{}"),
@@ -48,7 +50,7 @@ not delivered late in a burst. Every other kind goes reliably."""
 
 
 def reliable(key: str) -> bool:
-    """Whether messages on ``key`` go reliably (game state, control, UAV tasks)."""
+    """Whether messages on ``key`` go reliably (game state, control, UAV tasks, detections)."""
     return parse(key).kind not in BEST_EFFORT_KINDS
 
 
@@ -77,6 +79,10 @@ def state(game: str) -> str:
 
 def uav_task(game: str, uav: str) -> str:
     return _key(game, "uav", check_name(uav, "uav"), "task")
+
+
+def detection(game: str, uav: str) -> str:
+    return _key(game, "uav", check_name(uav, "uav"), "detection")
 
 
 def truth(game: str, agent: str) -> str:
@@ -118,7 +124,7 @@ def game_wide(game: str) -> str:
 @dataclass(frozen=True)
 class ParsedKey:
     """What a concrete key names: its ``kind``, the ``game``, and the names it
-    carries (``agent`` for fix/guidance/truth/alive, ``uav`` for uav-task,
+    carries (``agent`` for fix/guidance/truth/alive, ``uav`` for uav-task and detection,
     ``role`` for alive)."""
 
     kind: str

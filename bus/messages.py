@@ -143,5 +143,15 @@ class UavTask(Message, tag="uav-task"):
     alt: Altitude
 
 
-AnyMessage = Union[Fix, Truth, Guidance, GameState, Control, UavTask]
-MESSAGE_TYPES = (Fix, Truth, Guidance, GameState, Control, UavTask)
+class Detection(Message, tag="detection"):
+    """A UAV's camera saw ``agent`` at (``lat``, ``lon``) at time ``t``."""
+
+    uav: Name
+    t: Time
+    agent: Name
+    lat: Latitude
+    lon: Longitude
+
+
+AnyMessage = Union[Fix, Truth, Guidance, GameState, Control, UavTask, Detection]
+MESSAGE_TYPES = (Fix, Truth, Guidance, GameState, Control, UavTask, Detection)
