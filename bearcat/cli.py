@@ -29,6 +29,7 @@ from solvers.errors import InputError
 
 USER_ERRORS = (
     UsageError, MapError, InputError, ScenarioError, ProfileError, BusError, FileNotFoundError, IsADirectoryError, PermissionError,
+    TimeoutError,
 )  # fmt: skip
 
 

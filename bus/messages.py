@@ -87,7 +87,10 @@ class Guidance(Message, tag="guidance"):
     whose region it is; ``go`` the go / no-go verdict where the game has
     one; ``value`` the solver's value at the current state (time to win, area
     of the safe set, ...); ``boundary`` open lines to show (a pursuer's active
-    boundary, a planned path); ``reports`` every agent as last reported."""
+    boundary, a planned path); ``reports`` every agent as last reported (in a
+    game of limited visibility, as last seen by the agent's side);
+    ``possible`` where an unseen opponent may be (P_D of thesis 6.2);
+    ``seen_by`` the opponents' UAVs that have just seen this agent."""
 
     agent: Name
     seq: Sequence
@@ -100,6 +103,8 @@ class Guidance(Message, tag="guidance"):
     value: float | None = None
     boundary: Lines = []
     reports: Annotated[list[Report], msgspec.Meta(max_length=64)] = []
+    possible: Lines = []
+    seen_by: Annotated[list[Name], msgspec.Meta(max_length=64)] = []
     note: Text = ""
 
     def __post_init__(self):

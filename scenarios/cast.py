@@ -9,24 +9,31 @@ and the agent's name, so adding an agent does not change another's draws.
 from __future__ import annotations
 
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
 
 from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve
-from agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor
+from agents.ground_station.guidance import (
+    CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor, SearchAdvisor,
+)  # fmt: skip
 from agents.ground_station.referee import Contest, Referee
+from agents.ground_station.sight import Sight
+from agents.ground_station.uav_tasking import UavTasker
 from agents.human import behaviours
 from agents.human.agent import HumanAgent
 from agents.human.phone import Phone
 from agents.human.walker import Walker
 from agents.navigation import Navigator
+from agents.uav.agent import UavAgent
+from agents.uav.airframe import Airframe
+from agents.uav.autopilot import SimulatedAutopilot
 from netem.profiles import Profile
 from scenarios.schema import Scenario, ScenarioError
 from solvers.ctf_guidance import Guidance as CtfGuidance
 
-STREAMS = {"walker": 0, "phone": 1, "behaviour": 2}
+STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
 
 
 def stream(seed: int, agent: str, purpose: str) -> np.random.Generator:
@@ -36,39 +43,75 @@ def stream(seed: int, agent: str, purpose: str) -> np.random.Generator:
 
 @dataclass
 class Cast:
-    """Who plays a scenario: the ground station's ``referee`` and
-    ``guidance`` (None in a cast of people only) and the ``people``."""
+    """Who plays a scenario: the ground station's ``referee``, ``guidance``
+    and UAV ``tasking`` (None where the cast has no ground station or no
+    UAV), the ``people`` and the ``uavs``."""
 
     people: dict[str, HumanAgent]
     referee: Referee | None = None
     guidance: object | None = None
+    tasking: list = field(default_factory=list)
+    uavs: dict[str, UavAgent] = field(default_factory=dict)
+
+    @property
+    def ground(self) -> list:
+        """The ground station's agents."""
+        return [a for a in (self.referee, self.guidance, *self.tasking) if a is not None]
 
     @property
     def agents(self) -> list:
         """In the order the runtimes start and tick them."""
-        return [a for a in (self.referee, self.guidance) if a is not None] + list(self.people.values())
+        return self.ground + list(self.people.values()) + list(self.uavs.values())
 
 
 def cast(
-    scenario: Scenario, profile: Profile, seed: int, *, people=None, ground: bool = True, ctf_progress=None,
-    judge: str = "truth",
+    scenario: Scenario, profile: Profile, seed: int, *, people=None, uavs=None, ground: bool = True,
+    ctf_progress=None, judge: str = "truth", autopilots=None, uav_truth: bool = True,
 ) -> Cast:
-    """The agents of ``scenario``: the people named in ``people`` (default all)
-    and, with ``ground``, the ground station's referee (judging on ``judge``:
-    the simulation's truth, or the fixes when the players are real) and
-    guidance service."""
+    """The agents of ``scenario``: the people named in ``people`` and the
+    UAVs named in ``uavs`` (default: all of both if ``people`` is None, else
+    no UAV), each UAV flying in-process on the simulated autopilot unless
+    ``autopilots`` gives it another (and publishing its telemetry as truth
+    with ``uav_truth``: not for a real vehicle); and,
+    with ``ground``, the ground station's referee (judging on ``judge``: the
+    simulation's truth, or the fixes when the players are real), guidance
+    service and UAV tasking."""
     if scenario.game not in GAMES:
         raise ScenarioError(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
         )
     game = GAMES[scenario.game](scenario)
+    if scenario.uavs and not hasattr(game, "tasking"):
+        raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
+    flown = ([u.id for u in scenario.uavs] if people is None else []) if uavs is None else list(uavs)
     crowd = {a: game.person(scenario.agent(a), profile, seed) for a in chosen}
+    autopilots = dict(autopilots or {})
+    fleet = {}
+    for u in flown:
+        spec = _uav_spec(scenario, u)
+        autopilot = autopilots[u] if u in autopilots else simulated_autopilot(scenario, spec, seed)
+        fleet[u] = game.uav(spec, autopilot, truth=uav_truth)
     if not ground:
-        return Cast(crowd)
+        return Cast(crowd, uavs=fleet)
     if judge not in ("truth", "fixes"):
         raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
-    return Cast(crowd, game.referee(on_truth=judge == "truth"), game.guidance(ctf_progress))
+    tasking = game.tasking() if scenario.uavs else []
+    return Cast(crowd, game.referee(on_truth=judge == "truth"), game.guidance(ctf_progress), tasking, fleet)
+
+
+def simulated_autopilot(scenario: Scenario, spec, seed: int) -> SimulatedAutopilot:
+    """The in-process autopilot of UAV ``spec``, its home where it takes off."""
+    home = scenario.map.to_geodetic(*spec.start)
+    airframe = Airframe(max_speed=spec.speed, max_accel=spec.accel)
+    return SimulatedAutopilot(home, airframe=airframe, rng=stream(seed, spec.id, "uav"))
+
+
+def _uav_spec(scenario: Scenario, uav: str):
+    for spec in scenario.uavs:
+        if spec.id == uav:
+            return spec
+    raise ScenarioError(f"{scenario.source}: there is no UAV {uav!r}; the UAVs are {', '.join(u.id for u in scenario.uavs) or 'none'}")
 
 
 class _CtfGame:
@@ -91,6 +134,19 @@ class _CtfGame:
         self.phase = "return" if self.flag_taken else "capture"
         self.goals = {"capture": self.flag, "return": self.home}
         self._navigator = None
+        self._solved = None
+        self._taskers = None
+        teams = {a.id: a.team for a in scenario.agents} | {u.id: u.team for u in scenario.uavs}
+        self.sight = Sight(
+            game_map, teams, line_of_sight=r["visibility"] == "line-of-sight", uavs=[u.id for u in scenario.uavs]
+        )
+
+    def solved(self, progress=None) -> CtfGuidance:
+        if self._solved is None:
+            s = self.scenario
+            found = load_or_solve(CtfGame(s.map, s.rules["grid"], self.rules), s.rules["stages"], progress=progress)
+            self._solved = CtfGuidance(found.solution)
+        return self._solved
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
@@ -103,13 +159,45 @@ class _CtfGame:
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
-        solved = load_or_solve(CtfGame(s.map, s.rules["grid"], self.rules), s.rules["stages"], progress=progress)
         advisor = CtfAdvisor(
-            s.map, CtfGuidance(solved.solution), attacker=self.attacker.id, defender=self.defender.id, phase=self.phase
+            s.map, self.solved(progress), attacker=self.attacker.id, defender=self.defender.id, phase=self.phase
         )
+        if s.uavs:
+            advisor = SearchAdvisor(advisor, self.tasking(), self.sight.side("attacker"))
+        limited = self.sight.line_of_sight
         return GuidanceService(
-            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
-        )
+            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate,
+            sight=self.sight if limited or s.uavs else None,
+        )  # fmt: skip
+
+    def tasking(self) -> list[UavTasker]:
+        """One tasker per UAV of the attacking side (thesis 6.2 searches for
+        the defender), made once: the guidance shows what they track."""
+        if self._taskers is None:
+            self._taskers = self._make_taskers()
+        return self._taskers
+
+    def _make_taskers(self) -> list[UavTasker]:
+        s = self.scenario
+        if s.uav_of("defender"):
+            raise ScenarioError(f"{s.source}: only the attacker's side flies UAVs (thesis 6.2); uav {s.uav_of('defender')[0].id} is the defender's")
+        return [
+            UavTasker(
+                s.name, s.map, uav=u.id, attacker=self.attacker.id, defender=self.defender.id,
+                defender_start=self.defender.start, defender_speed=self.defender.speed, uav_speed=u.speed,
+                camera_radius=u.camera_radius, altitude=u.altitude, strategy=u.search,
+                ctf=self.solved() if u.search == "reachability" else None, sight=self.sight, name=f"tasking-{u.id}",
+            )
+            for u in s.uavs
+        ]  # fmt: skip
+
+    def uav(self, spec, autopilot, truth: bool = True) -> UavAgent:
+        opponents = [a.id for a in self.scenario.agents if a.team != spec.team]
+        return UavAgent(
+            self.scenario.name, spec.id, autopilot, altitude=spec.altitude, camera_radius=spec.camera_radius,
+            watch=opponents, fix_rate=spec.fix_rate, failsafe=spec.failsafe, link_timeout=spec.link_timeout,
+            truth=truth,
+        )  # fmt: skip
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:

@@ -2,7 +2,9 @@
 
 The launcher solves what the ground station will need first (so no peer
 starts against an empty cache), listens on a free loopback port that every
-peer connects to, starts the ground station and one walker per agent, waits
+peer connects to, starts the ground station and one walker per agent (and for each UAV a
+``bearcat vehicle`` emulator on its own UDP port, PX4 SITL's 14540 + i
+convention moved to free ports, with a UAV peer flying it), waits
 until every peer's liveliness token is up, sends the start command and
 supervises: the run ends when the referee says so, when a peer process dies
 (the referee sees its token vanish and ends the game; the launcher ends the
@@ -56,10 +58,19 @@ class LiveOutcome:
     out: str = ""
 
 
-def free_port() -> int:
-    with socket.socket() as s:
+def free_port(kind=socket.SOCK_STREAM) -> int:
+    with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
+    """The emulator of the scenario's UAV ``k``: system id k + 1, home where it takes off."""
+    lat, lon = scenario.map.to_geodetic(*scenario.uavs[k].start)
+    return [
+        sys.executable, "-m", "bearcat", "vehicle", "--connect", f"udpout:127.0.0.1:{port}", "--sysid", str(k + 1),
+        "--home", f"{lat:.8f},{lon:.8f},0", "--max-speed", str(scenario.uavs[k].speed),
+    ]  # fmt: skip
 
 
 def peer_command(role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path) -> list[str]:
@@ -111,6 +122,8 @@ def launch(
     keyboard = [a.id for a in scenario.agents if a.behaviour == "keyboard"]
     expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
     expected |= {keys.alive(game, "walker", a.id) for a in scenario.agents}
+    expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
+    expected |= {keys.alive(game, "ground-station", f"tasking-{u.id}") for u in scenario.uavs}
     children: dict[str, subprocess.Popen] = {}
     started_at = None
     reason = None
@@ -120,6 +133,18 @@ def launch(
             logfile = open(out / "peers" / f"{name}.log", "w")
             children[name] = subprocess.Popen(
                 peer_command(role, scenario_ref, name, endpoint, seed, netem, out),
+                stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+            )  # fmt: skip
+        for k, uav in enumerate(scenario.uavs):
+            port = free_port(socket.SOCK_DGRAM)
+            logfile = open(out / "peers" / f"vehicle-{uav.id}.log", "w")
+            children[f"vehicle-{uav.id}"] = subprocess.Popen(
+                vehicle_command(scenario, k, port), stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+            )
+            logfile = open(out / "peers" / f"{uav.id}.log", "w")
+            fly = ["--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"]
+            children[uav.id] = subprocess.Popen(
+                peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out) + fly,
                 stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
             )  # fmt: skip
         for name in keyboard:

@@ -130,9 +130,12 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
 
 
 def start_peer(
-    role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None, mode="peer", judge="truth"
+    role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None, mode="peer", judge="truth",
+    vehicle: str | None = None, sysid: int | None = None, emulated: bool = False,
 ) -> str:
-    """Build this peer's agents and run them until the game ends (``bearcat peer``)."""
+    """Build this peer's agents and run them until the game ends (``bearcat peer``).
+    A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
+    an ``emulated`` vehicle's telemetry is the truth."""
     import shapely
 
     from bus.errors import BusError
@@ -142,16 +145,29 @@ def start_peer(
     from scenarios.schema import ScenarioError
 
     profile = load_profile(netem)
+    autopilot = None
     if role == "ground-station":
         players = cast(scenario, profile, seed, people=[], ground=True, judge=judge)
-        agents, name = [players.referee, players.guidance], players.guidance.name
+        agents, name = players.ground, players.guidance.name
+    elif role == "uav":
+        from agents.uav.autopilot import MavsdkAutopilot
+
+        if agent not in [u.id for u in scenario.uavs]:
+            raise ScenarioError(f"{scenario.source}: there is no UAV {agent!r}; the UAVs are "
+                                f"{', '.join(u.id for u in scenario.uavs) or 'none'}")  # fmt: skip
+        if not vehicle:
+            raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
+        autopilot = MavsdkAutopilot(vehicle, sysid=sysid)
+        players = cast(scenario, profile, seed, people=[], uavs=[agent], ground=False,
+                       autopilots={agent: autopilot}, uav_truth=emulated)  # fmt: skip
+        agents, name = [players.uavs[agent]], agent
     elif role == "walker":
         if agent not in scenario.ids:
             raise ScenarioError(f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}")
         players = cast(scenario, profile, seed, people=[agent], ground=False)
         agents, name = [players.people[agent]], agent
     else:
-        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station or walker")
+        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker or uav")
     record = EventLog(None if out is None else f"{out}/peers/{name}.jsonl")
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
@@ -180,7 +196,23 @@ def start_peer(
     keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
     if keyboard:
         _read_keys(keyboard[0].behaviour)
-    return asyncio.run(run_peer(agents, session, scenario.name, shim=shim, record=record))
+    if autopilot is None:
+        return asyncio.run(run_peer(agents, session, scenario.name, shim=shim, record=record))
+    return asyncio.run(_fly(autopilot, run_peer(agents, session, scenario.name, shim=shim, record=record), session))
+
+
+async def _fly(autopilot, peer, session) -> str:
+    """Connect to the vehicle, then play; let go of it in every case."""
+    try:
+        await autopilot.connect()
+    except TimeoutError:
+        peer.close()
+        session.close()
+        raise
+    try:
+        return await peer
+    finally:
+        await autopilot.close()
 
 
 GROUND_PEERS = ("gs", "referee", "launcher")

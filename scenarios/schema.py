@@ -26,6 +26,14 @@ whether their phone shows reachability guidance::
     behaviour = "fake-out"
     aided = true
 
+    [[uav]]                      # optional: quadrotors flying for a team (thesis 6.2)
+    id = "q1"
+    team = "attacker"
+    start = [125.0, 12.0]        # where it takes off, map metres
+    altitude = 20.0              # m above home
+    camera_radius = 15.0         # r_q: the camera sees a disk this wide on the ground
+    search = "reachability"      # reachability | lawnmower | nearest
+
 Every error is one sentence naming the file and the key, such as
 ``fake-out.toml: agent[1].behaviour 'fakeout' is not one of ...``.
 """
@@ -38,16 +46,19 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
+from agents.uav.agent import FAILSAFES
 from maps import Map, MapError, load_map
 from netem.profiles import ProfileError, load_profile
 
 GAMES = ("ctf", "reach-avoid", "pursuit")
 TEAMS = {"ctf": ("attacker", "defender"), "reach-avoid": ("attacker", "defender"), "pursuit": ("evader", "pursuer")}
-BEHAVIOURS = ("follow-guidance", "direct", "fake-out", "go-no-go", "waypoints", "keyboard")
+BEHAVIOURS = ("follow-guidance", "direct", "fake-out", "go-no-go", "waypoints", "patrol", "keyboard")
+SEARCHES = ("reachability", "lawnmower", "nearest")
 
 # Per game, the rules keys with their defaults (None: derived from the map and speeds).
 RULE_KEYS = {
-    "ctf": {"capture_radius": None, "stages": "return", "grid": 45, "capture_time": None, "return_time": None},
+    "ctf": {"capture_radius": None, "stages": "return", "grid": 45, "capture_time": None, "return_time": None,
+            "visibility": "full"},
     "reach-avoid": {"capture_radius": None, "targets": ["flag", "home"], "spacing": None},
     "pursuit": {"capture_radius": 0.5, "spacing": None, "strategy": "area"},
 }
@@ -58,10 +69,18 @@ BEHAVIOUR_OPTIONS = {
     "fake-out": {"turn_every": 1.5, "spread": 100.0, "margin": 0.0},
     "go-no-go": {"hold": None, "fresh": 2.0, "margin": 0.0},
     "waypoints": {"points": None, "loop": False},
+    "patrol": {"points": None, "standoff": 6.0, "share": 0.5, "lead": 1.5, "memory": 5.0},
     "keyboard": {},
 }
 _AGENT_KEYS = {
     "id", "team", "start", "speed", "behaviour", "aided", "fix_rate", "reaction", "heading_error", "options",
+}  # fmt: skip
+
+
+# UAV keys and their defaults (None: required).
+UAV_KEYS = {
+    "id": None, "team": None, "start": None, "altitude": 20.0, "camera_radius": 15.0, "speed": 8.0, "accel": 3.0,
+    "search": "reachability", "failsafe": "hold", "link_timeout": 5.0, "fix_rate": 2.0,
 }  # fmt: skip
 
 
@@ -84,6 +103,25 @@ class AgentSpec:
 
 
 @dataclass(frozen=True)
+class UavSpec:
+    """A quadrotor flying for ``team``: its take-off point, altitude above
+    home, camera footprint radius r_q, limits, how the ground station tasks
+    it, and what it does when it loses the ground station."""
+
+    id: str
+    team: str
+    start: tuple[float, float]
+    altitude: float = 20.0
+    camera_radius: float = 15.0
+    speed: float = 8.0
+    accel: float = 3.0
+    search: str = "reachability"
+    failsafe: str = "hold"
+    link_timeout: float = 5.0
+    fix_rate: float = 2.0
+
+
+@dataclass(frozen=True)
 class Scenario:
     name: str
     source: str
@@ -98,6 +136,10 @@ class Scenario:
     description: str = ""
     text: str = ""  # the TOML it was read from, served to peers that ask
     dead_zones: tuple[tuple[tuple[float, float], ...], ...] = ()
+    uavs: tuple["UavSpec", ...] = ()
+
+    def uav_of(self, team: str) -> list["UavSpec"]:
+        return [u for u in self.uavs if u.team == team]
 
     def team(self, name: str) -> list[AgentSpec]:
         return [a for a in self.agents if a.team == name]
@@ -142,7 +184,7 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{source} is not valid TOML: {exc}") from None
     c = _Checker(source)
-    c.only(data, {"scenario", "rules", "guidance", "agent"}, "")
+    c.only(data, {"scenario", "rules", "guidance", "agent", "uav"}, "")
     head = c.table(data, "scenario", "")
     c.only(head, {"name", "description", "map", "game", "time_limit", "netem", "seed", "dead_zones"}, "scenario")
     game = c.choice(head, "game", GAMES, "scenario")
@@ -163,7 +205,11 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
     if not isinstance(raw_agents, list) or not raw_agents:
         raise ScenarioError(f"{source}: a scenario needs at least one [[agent]]")
     agents = tuple(_agent(c, raw, k, game, game_map) for k, raw in enumerate(raw_agents))
-    ids = [a.id for a in agents]
+    raw_uavs = data.get("uav", [])
+    if not isinstance(raw_uavs, list):
+        c.fail("uav must be an array of tables: [[uav]]")
+    uavs = tuple(_uav(c, raw, k, game, game_map) for k, raw in enumerate(raw_uavs))
+    ids = [a.id for a in agents] + [u.id for u in uavs]
     if len(set(ids)) != len(ids):
         twice = sorted({i for i in ids if ids.count(i) > 1})
         raise ScenarioError(f"{source}: agent id {twice[0]!r} is used twice")
@@ -192,6 +238,7 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         description=str(head.get("description", "")),
         text=text,
         dead_zones=tuple(zones),
+        uavs=uavs,
     )
 
 
@@ -221,12 +268,21 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
         options["hold"] = c.point(options["hold"], f"{at}.options.hold")
         options["fresh"] = c.number(options, "fresh", f"{at}.options", positive=True)
         options["margin"] = c.number(options, "margin", f"{at}.options")
-    elif behaviour == "waypoints":
+    elif behaviour in ("waypoints", "patrol"):
         points = options["points"]
         if not isinstance(points, list) or not points:
             c.fail(f"{at}.options.points must be a list of [east, north] points")
-        options["points"] = [c.point(p, f"{at}.options.points[{j}]") for j, p in enumerate(points)]
-        options["loop"] = c.boolean(options, "loop", f"{at}.options", default=False)
+        for j, point in enumerate(points):
+            try:
+                game_map.check_position(c.point(point, f"{at}.options.points[{j}]"), f"{at}.options.points[{j}]")
+            except MapError as exc:
+                raise ScenarioError(f"{c.source}: {exc}") from None
+        checked = {"points": [c.point(p, f"{at}.options.points[{j}]") for j, p in enumerate(points)]}
+        if behaviour == "waypoints":
+            checked["loop"] = c.boolean(options, "loop", f"{at}.options", default=False)
+        else:
+            checked.update({k: c.number(options, k, f"{at}.options") for k in ("standoff", "share", "lead", "memory")})
+        options = checked
     elif behaviour == "direct":
         options = {k: c.number(options, k, f"{at}.options") for k in options}
     elif behaviour == "fake-out":
@@ -245,6 +301,37 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
     )
 
 
+def _uav(c: _Checker, raw, k: int, game: str, game_map: Map) -> UavSpec:
+    at = f"uav[{k}]"
+    if not isinstance(raw, dict):
+        c.fail(f"{at} must be a table")
+    c.only(raw, set(UAV_KEYS), at)
+    given = {**UAV_KEYS, **raw}
+    for key, value in given.items():
+        if value is None:
+            c.fail(f"{at}.{key} is required")
+    uav_id = c.text(given, "id", at)
+    if not uav_id.replace("-", "").replace("_", "").isalnum() or not uav_id.isascii() or len(uav_id) > 64:
+        c.fail(f"{at}.id {uav_id!r} must be letters, digits, '-' or '_'")
+    start = c.point(given["start"], f"{at}.start")
+    xmin, ymin, xmax, ymax = game_map.bounds
+    if not (xmin <= start[0] <= xmax and ymin <= start[1] <= ymax):
+        c.fail(f"{at}.start {list(start)} is off map {game_map.name} ({xmin:g}..{xmax:g} x {ymin:g}..{ymax:g} m)")
+    return UavSpec(
+        id=uav_id,
+        team=c.choice(given, "team", TEAMS[game], at),
+        start=start,
+        altitude=c.number(given, "altitude", at, positive=True),
+        camera_radius=c.number(given, "camera_radius", at, positive=True),
+        speed=c.number(given, "speed", at, positive=True),
+        accel=c.number(given, "accel", at, positive=True),
+        search=c.choice(given, "search", SEARCHES, at),
+        failsafe=c.choice(given, "failsafe", FAILSAFES, at),
+        link_timeout=c.number(given, "link_timeout", at, positive=True),
+        fix_rate=c.number(given, "fix_rate", at, positive=True),
+    )
+
+
 def _rules(c: _Checker, given: dict, game: str, game_map: Map) -> dict:
     rules = dict(RULE_KEYS[game])
     c.only(given, set(rules), "rules")
@@ -254,6 +341,7 @@ def _rules(c: _Checker, given: dict, game: str, game_map: Map) -> dict:
             rules[key] = c.number(rules, key, "rules", positive=key != "capture_radius")
     if game == "ctf":
         rules["stages"] = c.choice(rules, "stages", ("return", "both"), "rules")
+        rules["visibility"] = c.choice(rules, "visibility", ("full", "line-of-sight"), "rules")
         grid = rules["grid"]
         if isinstance(grid, bool) or not isinstance(grid, int) or not 9 <= grid <= 201:
             c.fail(f"rules.grid must be an integer from 9 to 201, got {grid!r}")

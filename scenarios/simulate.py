@@ -75,7 +75,7 @@ def simulate(
         person = players.people.get(peer)
         return None if person is None else tuple(person.walker.position)
 
-    ground = (players.referee.name, players.guidance.name, LAUNCHER)
+    ground = (*(a.name for a in players.ground), LAUNCHER)
     shim = Shim(
         profile.link, seed, dead_zones=zones, where=where if zones is not None else None, record=record.impaired,
         colocated=ground,

@@ -9,6 +9,12 @@ attacker sees the defender's winning region R_D(x_a), its optimal heading
 and go (the reported state is an attacker win); the defender sees R_A(x_d)
 and its heading. An unaided agent's phone shows positions only.
 
+In a game of limited visibility (a ``Sight``), each agent is told only
+what its side has seen: its teammates and their UAVs always, an opponent
+while the two are in line of sight (both learn of each other at once) or
+when one of its side's UAVs detected it; the agent a UAV saw is alerted
+(``seen_by``). The solver then answers from what that agent knows.
+
 Fixes are what the network delivered, GPS error included: a fix inside a
 building or off the map is moved to the nearest free point before the
 solver is asked, as a person's phone would still show them somewhere.
@@ -24,12 +30,13 @@ import shapely.ops
 
 from agents.protocol import Send
 from bus import keys
-from bus.messages import Fix, GameState, Guidance, Message, Report
+from bus.messages import Detection, Fix, GameState, Guidance, Message, Report
 from maps import Map
 from solvers.ctf_guidance import Guidance as CtfGuidance
 from solvers.errors import InputError
 
 MAX_RING_POINTS = 4096
+SPOTTED_FOR = 2.0  # s an agent's screen says a UAV saw it
 
 
 class _Fixes:
@@ -63,15 +70,20 @@ class GuidanceService:
     watches: tuple[str, ...] = ()
 
     def __init__(self, game: str, game_map: Map, agents, *, advisor=None, aided=None, rate: float = 10.0,
-                 name: str = "gs") -> None:  # fmt: skip
+                 name: str = "gs", sight=None) -> None:  # fmt: skip
         self.game, self.name, self.map = game, name, game_map
         self.agents = tuple(agents)
         self.advisor = advisor
         self.aided = dict(aided or {})
         self.period = 1.0 / rate
         self.ended = False
+        self.sight = sight
         self.subscriptions = (keys.every(game, "fix"), keys.state(game))
+        if sight is not None:
+            self.subscriptions += (keys.every(game, "detection"),)
         self.fixes = _Fixes(game_map)
+        self.known = {a: _Fixes(game_map) for a in self.agents} if sight is not None else None
+        self.spotted: dict[str, tuple[str, float]] = {}  # agent -> (UAV that saw it, when)
         self.seq = 0
         self._last = {a: -np.inf for a in self.agents}
 
@@ -80,8 +92,18 @@ class GuidanceService:
 
     def handle(self, key: str, message: Message, now: float) -> list[Send]:
         if isinstance(message, Fix):
-            if self.fixes.take(message) and message.agent in self._last:
+            if not self.fixes.take(message):
+                return []
+            if self.known is not None:
+                self._share(message)
+            if message.agent in self._last:
                 return self._send([message.agent], now)
+        elif isinstance(message, Detection) and self.known is not None:
+            seen = Fix(agent=message.agent, seq=0, t=message.t, lat=message.lat, lon=message.lon)
+            for viewer in self.agents:
+                if self.sight.allies(viewer, message.uav):
+                    self.known[viewer].take(seen)
+            self.spotted[message.agent] = (message.uav, now)
         elif isinstance(message, GameState):
             self.ended = message.phase == "ended"
             if self.advisor is not None:
@@ -95,17 +117,38 @@ class GuidanceService:
         due = [a for a in self.agents if now - self._last[a] >= self.period - 1e-9]
         return self._send(due, now)
 
+    def _share(self, fix: Fix) -> None:
+        """Tell whoever may know of ``fix``: its side; and, if it is in line of
+        sight of an opponent, that opponent, who is seen in turn."""
+        sight, mover = self.sight, fix.agent
+        where = self.fixes.latest[mover][0]
+        for viewer in self.agents:
+            if sight.allies(viewer, mover):
+                self.known[viewer].take(fix)
+                continue
+            held = self.fixes.latest.get(viewer)
+            if held is None or mover in sight.uavs or not sight.sees(held[0], where):
+                continue
+            self.known[viewer].take(fix)
+            if mover in self.known:
+                self.known[mover].take(held[2])
+
     def _send(self, agents, now: float) -> list[Send]:
         if self.ended or not agents:
             return []
-        reports = self.fixes.reports()
+        everything = self.fixes.reports() if self.known is None else None
         out = []
         for agent in agents:
+            fixes = self.fixes if self.known is None else self.known[agent]
             fields = {"game": "none"}
             if self.advisor is not None and self.aided.get(agent):
-                fields = self.advisor(agent, self.fixes, now)
+                fields = self.advisor(agent, fixes, now)
+            spotted = self.spotted.get(agent)
+            if spotted is not None and now - spotted[1] <= SPOTTED_FOR:
+                fields = {**fields, "seen_by": [spotted[0]]}
             self.seq += 1
             self._last[agent] = now
+            reports = everything if everything is not None else fixes.reports()
             out.append(Send(keys.guidance(self.game, agent), Guidance(agent=agent, seq=self.seq, t=now, reports=reports, **fields)))
         return out
 
@@ -294,14 +337,14 @@ class ReachAvoidAdvisor:
         except InputError as exc:
             return {"game": "reach-avoid", "note": str(exc)[:200]}
         fields = {"game": "reach-avoid", "region_of": self.attacker, "go": solution.reached}
-        fields["region"] = self._geodetic_rings(_mask_rings(self.grid, solution.stages[0].safe))
+        fields["region"] = _geodetic_rings(self.map, _mask_rings(self.grid, solution.stages[0].safe))
         if solution.path is not None and len(solution.path.points) > 1:
             path = solution.path.points
             along = np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])
             aim = path[min(int(np.searchsorted(along, 3.0 * max(self.grid.spacing))), len(path) - 1)]
             if np.hypot(*(aim - a)) > 1e-9:
                 fields["heading"] = _bearing(aim - a)
-            fields["boundary"] = self._geodetic_rings([path[:: max(1, len(path) // 2000)]])
+            fields["boundary"] = _geodetic_rings(self.map, [path[:: max(1, len(path) // 2000)]])
             fields["value"] = float(solution.value)
         return fields
 
@@ -311,13 +354,44 @@ class ReachAvoidAdvisor:
             return p
         return np.asarray(shapely.ops.nearest_points(self._inside, shapely.Point(p))[0].coords[0])
 
-    def _geodetic_rings(self, rings) -> list:
-        out = []
-        for ring in rings[:64]:
-            ring = np.asarray(ring)[:MAX_RING_POINTS]
-            lat, lon = self.map.to_geodetic(ring[:, 0], ring[:, 1])
-            out.append(list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist())))
-        return out
+
+
+class SearchAdvisor:
+    """Capture-the-flag guidance under limited visibility (thesis 6.2): the
+    CTF answer from what the agent's side knows, and for the side that flies
+    the UAVs, where the unseen defender may be (P_D, from their taskers)."""
+
+    def __init__(self, ctf: CtfAdvisor, taskers, side) -> None:
+        self.ctf = ctf
+        self.taskers = list(taskers)
+        self.side = frozenset(side)
+        self._drawn: tuple[int, list] = (-1, [])
+
+    def state(self, message: GameState) -> None:
+        self.ctf.state(message)
+
+    def __call__(self, agent: str, fixes: _Fixes, now: float) -> dict:
+        fields = {**self.ctf(agent, fixes, now), "game": "search"}
+        if agent in self.side:
+            fields["possible"] = self._possible()
+        return fields
+
+    def _possible(self) -> list:
+        """P_D's outlines, redrawn only when a tasker updated it (once a second)."""
+        version = sum(t.picture.updates for t in self.taskers)
+        if version != self._drawn[0]:
+            rings = [ring for t in self.taskers for ring in _mask_rings(t.grid, t.picture.possible)]
+            self._drawn = (version, _geodetic_rings(self.ctf.map, rings))
+        return self._drawn[1]
+
+
+def _geodetic_rings(game_map: Map, rings) -> list:
+    out = []
+    for ring in rings[:64]:
+        ring = np.asarray(ring)[:MAX_RING_POINTS]
+        lat, lon = game_map.to_geodetic(ring[:, 0], ring[:, 1])
+        out.append(list(zip(np.atleast_1d(lat).tolist(), np.atleast_1d(lon).tolist())))
+    return out
 
 
 def _mask_rings(grid, mask: np.ndarray) -> list[np.ndarray]:

@@ -4,9 +4,11 @@ saw and what each phone showed, on one time line.
 - ``map``: the area, buildings and game regions (static);
 - ``ground/truth/AGENT``: where each agent really was (simulation only);
 - ``ground/fix/AGENT``: each agent as its fixes reported it, beside the truth;
+- ``ground/uav/UAV``: each UAV's search target and its detections;
 - ``phone/AGENT/...``: that phone's screen as of the guidance it had
   received: the opponent's winning region, the heading ring's arrow, the
-  agents as last reported;
+  agents as last reported, where an unseen opponent may be (P_D) and an
+  alert when a UAV saw this agent;
 - ``game``: the referee's states as a text log, and the solver's value
   shown to each phone as a plot.
 
@@ -73,6 +75,12 @@ def write_recording(events_path: str | Path, game_map: Map, rrd_path: str | Path
                 rec.log("game/state", rr.TextLog(f"{m['phase']}: {m.get('winner') or ''} {m.get('reason', '')}".strip()))
             elif m["type"] == "fix" and e["sender"] != "launcher":
                 _log_fix(rec, rr, m, to_local, colour_of)
+            elif m["type"] == "uav-task":
+                rec.log(f"ground/uav/{m['uav']}/target", rr.Points2D([to_local(m["lat"], m["lon"])], radii=1.5,
+                        colors=[colour_of(m["uav"])], labels=[f"{m['uav']} {m['kind']}"]))  # fmt: skip
+            elif m["type"] == "detection":
+                rec.log(f"ground/uav/{m['uav']}/detection", rr.Points2D([to_local(m["lat"], m["lon"])], radii=2.0,
+                        colors=[(255, 200, 0)], labels=[f"{m['agent']} seen by {m['uav']}"]))  # fmt: skip
         elif kind == "received":
             m = sent.get((e["key"], e.get("seq")))
             if m is None:
@@ -115,6 +123,11 @@ def _log_screen(rec, rr, m, to_local, colour_of) -> None:
     base = f"phone/{agent}"
     rings = [np.array([to_local(lat, lon) for lat, lon in ring]) for ring in m.get("region", []) if ring]
     rec.log(f"{base}/region", rr.LineStrips2D(rings, colors=[(230, 60, 160)]) if rings else rr.Clear(recursive=False))
+    possible = [np.array([to_local(lat, lon) for lat, lon in ring]) for ring in m.get("possible", []) if ring]
+    if possible or m.get("game") == "search":
+        rec.log(f"{base}/possible", rr.LineStrips2D(possible, colors=[(255, 140, 0)]) if possible else rr.Clear(recursive=False))
+    if m.get("seen_by"):
+        rec.log(f"{base}/alert", rr.TextLog(f"{agent} seen by {', '.join(m['seen_by'])}"))
     reports = m.get("reports", [])
     if reports:
         points = [to_local(r["lat"], r["lon"]) for r in reports]

@@ -18,6 +18,9 @@ direction (east, north) or None to stand still.
   says go with opponent data fresher than a threshold, then commit to the
   heading for good.
 - ``waypoints``: visit points in turn (and loop).
+- ``patrol`` (thesis 6.2.4): walk a route round and round while no opponent
+  is in sight; play ``direct`` against one seen in the last ``memory``
+  seconds.
 - ``keyboard``: arrow keys or WASD set the direction; the runtime feeds keys.
 """
 
@@ -197,6 +200,20 @@ class Waypoints:
         return situation.navigator.toward(tuple(self.points[self.index]), me)
 
 
+class Patrol:
+    name = "patrol"
+
+    def __init__(self, points, memory: float = 5.0, **direct) -> None:
+        self.route = Waypoints(points, loop=True)
+        self.direct = Direct(**direct)
+        self.memory = float(memory)
+
+    def decide(self, now, me, screen, situation):
+        if any(screen.age(o, now) <= self.memory for o in situation.opponents):
+            return self.direct.decide(now, me, screen, situation)
+        return self.route.decide(now, me, screen, situation)
+
+
 KEYS = {
     "up": (0.0, 1.0), "w": (0.0, 1.0), "down": (0.0, -1.0), "s": (0.0, -1.0),
     "left": (-1.0, 0.0), "a": (-1.0, 0.0), "right": (1.0, 0.0), "d": (1.0, 0.0),
@@ -235,6 +252,8 @@ def make(name: str, options: dict, rng: np.random.Generator):
         return GoNoGo(**options)
     if name == "waypoints":
         return Waypoints(**options)
+    if name == "patrol":
+        return Patrol(**options)
     if name == "keyboard":
         return Keyboard()
     raise ValueError(f"there is no behaviour {name!r}")

@@ -8,7 +8,9 @@ ground station and the phones see it like any agent. Its camera sees a
 disk of radius ``r_q`` on the ground (V_Q of 6.2.2): an opponent whose
 true position lies in it while the UAV flies is reported as a detection
 (judged on truth in simulation, where the truth keys exist). When the game
-ends it lands. If the ground station's liveliness token vanishes, or
+ends it lands. A simulated or emulated vehicle's telemetry is the truth, and
+goes out on its truth key too (``truth``), for the referee and the
+recorder. If the ground station's liveliness token vanishes, or
 nothing has come from it for ``link_timeout`` seconds while flying, it
 applies its failsafe once (``hold``, ``return`` or ``land``), as PX4's
 data-link-loss action does; a new task from the ground station takes it
@@ -45,6 +47,7 @@ class UavAgent:
         fix_rate: float = 2.0,
         failsafe: str = "hold",
         link_timeout: float = 5.0,
+        truth: bool = False,
     ) -> None:
         if failsafe not in FAILSAFES:
             raise ValueError(f"failsafe {failsafe!r} is not one of {', '.join(FAILSAFES)}")
@@ -54,6 +57,7 @@ class UavAgent:
         self.camera_radius = float(camera_radius)
         self.failsafe = failsafe
         self.link_timeout = float(link_timeout)
+        self.truth = truth
         self.period = 0.1
         self.subscriptions = (
             keys.uav_task(game, name), keys.state(game), keys.control(game),
@@ -109,13 +113,19 @@ class UavAgent:
         lost = now - self._heard > self.link_timeout
         if lost and self.flying and not self.ended and self.failsafe_at is None:
             self._fail_safe(now, f"nothing from the ground station for {self.link_timeout:g} s")
-        if self.state is None or now < self._next_fix:
-            return []
-        self._next_fix = max(self._next_fix + self._fix_every, now)
-        self._seq += 1
         s = self.state
-        fix = Fix(agent=self.name, seq=self._seq, t=now, lat=s.lat, lon=s.lon, alt=s.alt, heading=s.heading)
-        return [Send(keys.fix(self.game, self.name), fix)]
+        if s is None:
+            return []
+        out = []
+        if self.truth:
+            truth = Truth(agent=self.name, t=now, lat=s.lat, lon=s.lon, alt=s.alt, heading=s.heading)
+            out.append(Send(keys.truth(self.game, self.name), truth))
+        if now >= self._next_fix:
+            self._next_fix = max(self._next_fix + self._fix_every, now)
+            self._seq += 1
+            fix = Fix(agent=self.name, seq=self._seq, t=now, lat=s.lat, lon=s.lon, alt=s.alt, heading=s.heading)
+            out.append(Send(keys.fix(self.game, self.name), fix))
+        return out
 
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         parsed = keys.parse(key)

@@ -36,12 +36,13 @@ def register(subparsers) -> None:
     peer = subparsers.add_parser(
         "peer",
         help="start one peer by hand (a person at a keyboard, or against real hardware)",
-        description="Start one peer of a scenario: the ground station (referee and guidance) or one walker.",
+        description="Start one peer of a scenario: the ground station (referee, guidance and UAV tasking), one "
+        "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
     )
-    peer.add_argument("role", choices=("ground-station", "walker"))
+    peer.add_argument("role", choices=("ground-station", "walker", "uav"))
     peer.add_argument("--scenario", required=True, metavar="SCENARIO",
                       help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station")
-    peer.add_argument("--id", default="gs", metavar="ID", help="the walker's agent id (ignored for the ground station)")
+    peer.add_argument("--id", default="gs", metavar="ID", help="the walker's or UAV's id (ignored for the ground station)")
     peer.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
                       help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
     peer.add_argument("--listen", action="append", metavar="ENDPOINT",
@@ -53,6 +54,12 @@ def register(subparsers) -> None:
     peer.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
+    peer.add_argument("--vehicle", metavar="URL",
+                      help="uav: MAVSDK URL of the vehicle, e.g. udpin://0.0.0.0:14540 (PX4 SITL, bearcat vehicle) "
+                      "or serial:///dev/ttyACM0:57600 (a real PX4)")
+    peer.add_argument("--sysid", type=int, metavar="N", help="uav: the vehicle's MAVLink system id (default: the first autopilot)")
+    peer.add_argument("--emulated", action="store_true",
+                      help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see")
     peer.set_defaults(run=run_peer)
 
 
@@ -115,8 +122,9 @@ def run_peer(args) -> int:
     reason = start_peer(
         args.role, scenario, args.id, connect=args.connect, listen=args.listen, mode=args.mode, judge=args.judge,
         seed=scenario.seed if args.seed is None else args.seed, netem=args.netem or scenario.netem, out=args.out,
+        vehicle=args.vehicle, sysid=args.sysid, emulated=args.emulated,
     )  # fmt: skip
-    print(f"peer {args.id if args.role == 'walker' else 'gs'}: {reason}", flush=True)
+    print(f"peer {args.id if args.role != 'ground-station' else 'gs'}: {reason}", flush=True)
     return 0
 
 

@@ -1,0 +1,187 @@
+"""UAV tasking: where the attacking side's UAV searches next (thesis 6.2).
+
+Once a second the ground station updates P_D, where the defender may be,
+from what the attacking side saw since (the attacker's line of sight V_A
+from its last fix, the UAV's camera disk V_Q from the UAV's last fix, a
+detection or a sighting collapsing it onto the defender), and sends the
+UAV its next point: by the reachability hierarchy of eqs. 6.7-6.9, by a
+lawnmower sweep, or to the nearest point where the defender may be. While
+the defender is in sight the UAV tracks it, as in the 6.2.4 trials. The
+task is sent every second even when it has not changed: it is also the
+UAV's sign that the ground station is there (its failsafe waits on it).
+
+``picture`` keeps the latest sets, for the attacker's phone and the
+recorder; everything is computed from fixes and detections, never truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.interpolate import RegularGridInterpolator
+
+from agents.protocol import Send
+from bus import keys
+from bus.messages import Detection, Fix, GameState, Message, UavTask
+from maps import Map
+from maps.raster import rasterize
+from solvers import search
+from solvers.ctf_guidance import Guidance as CtfGuidance
+from solvers.errors import InputError
+
+PERIOD = 1.0  # s between updates and tasks
+TRACK_FOR = 3.0  # s the UAV keeps tracking the defender's last sighting
+PRIOR_RADIUS = 5.0  # m: P_D at the start, around the defender's known starting point
+
+
+@dataclass
+class Picture:
+    """The search as the ground station last saw it (metres, grid masks)."""
+
+    possible: np.ndarray | None = None
+    target: tuple[float, float] | None = None
+    tier: int | None = None
+    strategy: str = ""
+    updates: int = 0  # counts the updates, so a viewer redraws only what changed
+    found_at: float | None = None  # first time the attacking side saw the defender
+    sightings: list[tuple[float, str]] = field(default_factory=list)  # (time, by whom)
+
+
+class UavTasker:
+    role = "ground-station"
+    watches: tuple[str, ...] = ()
+    period = PERIOD
+
+    def __init__(
+        self,
+        game: str,
+        game_map: Map,
+        *,
+        uav: str,
+        attacker: str,
+        defender: str,
+        defender_start,
+        defender_speed: float,
+        uav_speed: float,
+        camera_radius: float,
+        altitude: float,
+        strategy: str = "reachability",
+        ctf: CtfGuidance | None = None,
+        sight,
+        spacing: float = 2.0,
+        name: str = "uav-tasking",
+    ) -> None:
+        if strategy == "reachability" and ctf is None:
+            raise InputError("reachability-guided search needs the capture-the-flag solution")
+        self.game, self.name, self.map = game, name, game_map
+        self.uav, self.attacker, self.defender = uav, attacker, defender
+        self.defender_speed, self.uav_speed = float(defender_speed), float(uav_speed)
+        self.camera_radius, self.altitude = float(camera_radius), float(altitude)
+        self.strategy, self.ctf, self.sight = strategy, ctf, sight
+        self.subscriptions = (keys.every(game, "fix"), keys.every(game, "detection"), keys.state(game))
+        raster = rasterize(game_map, spacing)
+        self.grid, self.terrain = raster.grid, raster.speed
+        self.free = self.terrain > 0
+        self._nodes = np.stack(np.meshgrid(*self.grid.axes(), indexing="ij"), axis=-1)
+        self.possible = search.PossibleDefender.around(self.terrain, self.grid, defender_start, PRIOR_RADIUS)
+        self.picture = Picture(possible=self.possible.mask, strategy=strategy)
+        self.running = False
+        self.ended = False
+        self._fixes: dict[str, tuple[np.ndarray, float]] = {}
+        self._seen: tuple[np.ndarray, float] | None = None  # the defender's last sighting by the attacking side
+        self._last_update: float | None = None
+        self._sweep: np.ndarray | None = None
+        self._sweep_index = 0
+        self._seq = 0
+        self._phase = "return"
+
+    # ------------------------------------------------------------------ agent protocol
+
+    def start(self, now: float) -> list[Send]:
+        return []
+
+    def handle(self, key: str, message: Message, now: float) -> list[Send]:
+        if isinstance(message, Fix):
+            held = self._fixes.get(message.agent)
+            if held is None or message.t > held[1]:
+                self._fixes[message.agent] = (np.array(self.map.to_local(message.lat, message.lon)), message.t)
+                self._check_sight(now)
+        elif isinstance(message, Detection) and message.agent == self.defender:
+            self._sighted(np.array(self.map.to_local(message.lat, message.lon)), message.t, message.uav)
+        elif isinstance(message, GameState):
+            self.running = message.phase == "running"
+            self.ended = message.phase == "ended"
+            self._phase = "capture" if message.flag_holder is None else "return"
+        return []
+
+    def peer(self, key: str, alive: bool, now: float) -> list[Send]:
+        return []
+
+    def tick(self, now: float) -> list[Send]:
+        if self.ended or not self.running or self.attacker not in self._fixes or self.uav not in self._fixes:
+            return []
+        a, uav = self._fixes[self.attacker][0], self._fixes[self.uav][0]
+        seen_a = search.visibility(self.free, self.grid, a)
+        seen_q = search.footprint(self.grid, uav, self.camera_radius)
+        dt = 0.0 if self._last_update is None else now - self._last_update
+        self._last_update = now
+        if self._seen is not None and now - self._seen[1] <= TRACK_FOR:
+            self.possible.found(self._seen[0], radius=self.defender_speed * max(now - self._seen[1], 0.0))
+            target, tier = tuple(self._seen[0]), None
+        else:
+            self.possible.advance(dt, self.defender_speed, seen_a | seen_q)
+            target, tier = self._choose(a, uav, seen_a, seen_q)
+        self.picture.possible, self.picture.target, self.picture.tier = self.possible.mask, target, tier
+        self.picture.updates += 1
+        if target is None:
+            return []
+        self._seq += 1
+        lat, lon = self.map.to_geodetic(*target)
+        task = UavTask(uav=self.uav, seq=self._seq, t=now, kind="search", lat=lat, lon=lon, alt=self.altitude)
+        return [Send(keys.uav_task(self.game, self.uav), task)]
+
+    # ------------------------------------------------------------------ sensing
+
+    def _check_sight(self, now: float) -> None:
+        """A sighting when the defender's and the attacker's fixes see each other."""
+        a, d = self._fixes.get(self.attacker), self._fixes.get(self.defender)
+        if a is not None and d is not None and self.sight.sees(a[0], d[0]):
+            self._sighted(d[0], d[1], self.attacker)
+
+    def _sighted(self, where: np.ndarray, t: float, by: str) -> None:
+        if self._seen is None or t > self._seen[1]:
+            self._seen = (where, t)
+            if self.picture.found_at is None:
+                self.picture.found_at = t
+            self.picture.sightings.append((t, by))
+
+    # ------------------------------------------------------------------ where next
+
+    def _choose(self, a, uav, seen_a, seen_q):
+        if self.strategy == "reachability":
+            wins = self._defender_wins(a)
+            found = search.search_target(
+                self.terrain, self.grid, self.possible.mask, seen_a, seen_q, wins, attacker=a, uav=uav,
+                defender_speed=self.defender_speed, uav_speed=self.uav_speed, uav_radius=self.camera_radius,
+            )  # fmt: skip
+            return found.target, found.tier
+        if self.strategy == "nearest":
+            return search.nearest_unobserved(self.grid, self.possible.mask, uav), None
+        return self._next_sweep_point(uav), None
+
+    def _next_sweep_point(self, uav) -> tuple[float, float]:
+        if self._sweep is None:
+            self._sweep = search.lawnmower(self.map.bounds, self.camera_radius, start=uav)
+        if np.hypot(*(self._sweep[self._sweep_index] - uav)) <= max(2.0, 0.2 * self.camera_radius):
+            self._sweep_index = (self._sweep_index + 1) % len(self._sweep)
+        return tuple(float(v) for v in self._sweep[self._sweep_index])
+
+    def _defender_wins(self, attacker) -> np.ndarray:
+        """W_D(x_a) from the solved game, resampled from its grid onto the search grid."""
+        try:
+            values = self.ctf.defender_region_values(attacker, self._phase)
+        except InputError:  # the attacker's fix is off the solver's grid or in a building
+            return np.zeros(self.grid.shape, dtype=bool)
+        sample = RegularGridInterpolator(self.ctf.arena.grid.axes(), values, bounds_error=False, fill_value=-1.0)
+        return (sample(self._nodes) > 0) & self.free
