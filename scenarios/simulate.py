@@ -178,11 +178,18 @@ def simulate(
 
 
 def _notes(players) -> dict:
-    """What the behaviours decided that a study needs (a go-no-go commit time, a fake-out's last state)."""
+    """What a study needs to know of a game besides its outcome: when a
+    go-no-go attacker committed or a fake-out went, when the attacking side
+    first saw the defender and by what means."""
     notes = {}
     for name, person in players.people.items():
         b = person.behaviour
         for attribute in ("committed_at", "went_at"):
             if getattr(b, attribute, None) is not None:
                 notes[f"{name}.{attribute}"] = getattr(b, attribute)
+    for tasker in players.tasking:
+        picture = tasker.picture
+        if picture.found_at is not None:
+            notes[f"{tasker.uav}.found_at"] = picture.found_at
+            notes[f"{tasker.uav}.found_by"] = picture.sightings[0][1]
     return notes

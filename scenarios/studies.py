@@ -4,7 +4,10 @@
 position, fakes out an unaided defender, and tries the same against an
 aided one. ``go-no-go`` (3.5.2): an attacker waiting by cover commits when
 its display says go; a go the game then loses is a false go, and how often
-those happen depends on the network profile.
+those happen depends on the network profile. ``search`` (6.2.4): the UAV
+looks for the defender the attacker cannot see, guided by reachability,
+sweeping like a lawnmower, or going to the nearest place the defender may
+be; how soon the defender is found, and how often the attacker wins.
 
 Each game is one task of the resumable batch runner, seeded on its own, so
 any game can be replayed with ``bearcat simulate SCENARIO --seed S --netem P``.
@@ -17,6 +20,7 @@ from collections import defaultdict
 STUDIES = {
     "fake-out": {"scenarios": ("fake-out", "fake-out-aided-defender"), "profiles": (None,)},
     "go-no-go": {"scenarios": ("go-no-go",), "profiles": ("ideal", "wifi", "3g", "3g-degraded")},
+    "search": {"scenarios": ("search",), "profiles": (None,), "searches": ("reachability", "lawnmower", "nearest")},
 }
 
 
@@ -25,8 +29,10 @@ def study_tasks(study: str, trials: int, seed: int, profiles=None) -> list[dict]
     tasks = []
     for scenario in spec["scenarios"]:
         for profile in profiles or spec["profiles"]:
-            for s in range(seed, seed + trials):
-                tasks.append({"key": f"{scenario}/{profile or 'own'}/{s}", "scenario": scenario, "netem": profile, "seed": s})
+            for search in spec.get("searches", (None,)):
+                for s in range(seed, seed + trials):
+                    key = "/".join(str(part) for part in (scenario, profile or "own", search, s) if part is not None)
+                    tasks.append({"key": key, "scenario": scenario, "netem": profile, "seed": s, "search": search})
     return tasks
 
 
@@ -35,20 +41,23 @@ def play_task(task: dict) -> dict:
     value at the true positions when the attacker went (negative: the window
     its display showed was really there)."""
     import tempfile
-    from dataclasses import asdict
+    from dataclasses import asdict, replace
 
     from scenarios.schema import load_scenario
     from scenarios.simulate import simulate
 
     scenario = load_scenario(task["scenario"])
+    if task.get("search") is not None:
+        scenario = replace(scenario, uavs=tuple(replace(u, search=task["search"]) for u in scenario.uavs))
     with tempfile.TemporaryDirectory() as tmp:
         events = f"{tmp}/events.jsonl"
         outcome = simulate(scenario, seed=task["seed"], netem=task["netem"], events=events)
         row = {k: v for k, v in asdict(outcome).items() if k in ("winner", "reason", "elapsed", "netem", "notes")}
         went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
         true_value = None if went is None else _true_value(scenario, events, went)
+    found = [v for k, v in outcome.notes.items() if k.endswith(".found_at")]
     return {**row, "key": task["key"], "scenario": task["scenario"], "seed": task["seed"], "went_at": went,
-            "true_value": true_value}  # fmt: skip
+            "true_value": true_value, "search": task.get("search"), "found_at": min(found) if found else None}  # fmt: skip
 
 
 def _true_value(scenario, events: str, t: float) -> float | None:
@@ -66,8 +75,7 @@ def _true_value(scenario, events: str, t: float) -> float | None:
     game = _CtfGame(scenario)
     if game.attacker.id not in where or game.defender.id not in where:
         return None
-    advisor = game.guidance().advisor
-    return round(float(advisor.solved.evaluate(where[game.attacker.id], where[game.defender.id], game.phase).value), 3)
+    return round(float(game.solved().evaluate(where[game.attacker.id], where[game.defender.id], game.phase).value), 3)
 
 
 def summarise(results) -> list[dict]:
@@ -90,6 +98,25 @@ def summarise(results) -> list[dict]:
             "false_goes": len(went) - good, "false_go_rate": round((len(went) - good) / len(went), 3) if went else None,
             "median_go_time": _median([g["went_at"] for g in went]),
             "goes_really_open": len(real), "really_open_won": sum(g["winner"] == "attacker" for g in real),
+        })  # fmt: skip
+    return rows
+
+
+def summarise_search(results) -> list[dict]:
+    """Per search strategy: games, how many found the defender and how soon
+    (median and mean seconds of game time, over the games that found it),
+    and the attacker's wins."""
+    groups = defaultdict(list)
+    for r in results:
+        groups[r["search"]].append(r)
+    rows = []
+    for search, games in sorted(groups.items()):
+        found = [g["found_at"] for g in games if g.get("found_at") is not None]
+        wins = sum(g["winner"] == "attacker" for g in games)
+        rows.append({
+            "search": search, "games": len(games), "found": len(found), "median_time_to_find": _median(found),
+            "mean_time_to_find": round(sum(found) / len(found), 2) if found else None,
+            "attacker_wins": wins, "attacker_win_rate": round(wins / len(games), 3),
         })  # fmt: skip
     return rows
 

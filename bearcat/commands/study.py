@@ -1,6 +1,6 @@
-"""``bearcat study fake-out|go-no-go``: the field studies of thesis 3.5 as
-batches of simulated games, resumable, with a table at the end
-(``DIR/results.jsonl`` per game, ``DIR/summary.json``)."""
+"""``bearcat study fake-out|go-no-go|search``: the field studies of thesis
+3.5 and 6.2.4 as batches of simulated games, resumable, with a table at the
+end (``DIR/results.jsonl`` per game, ``DIR/summary.json``)."""
 
 from __future__ import annotations
 
@@ -14,10 +14,11 @@ from scenarios.studies import STUDIES
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "study",
-        help="the fake-out and go/no-go studies of thesis 3.5, as batches of simulated games",
+        help="the fake-out, go/no-go and UAV search studies of thesis 3.5 and 6.2.4, as batches of simulated games",
         description="fake-out: the aided attacker's fake-out against an unaided and an aided defender (3.5.1). "
         "go-no-go: how often an attacker's go, decided on what the network delivered, is false, per network "
-        "profile (3.5.2).",
+        "profile (3.5.2). search: reachability-guided UAV search against a lawnmower sweep and the nearest "
+        "unobserved point: time until the defender is found, and the attacker's wins (6.2.4).",
     )
     p.add_argument("study", choices=tuple(STUDIES))
     p.add_argument("--trials", type=int, default=50, metavar="N", help="games per scenario and profile (default 50)")
@@ -35,7 +36,7 @@ def run(args) -> int:
     from scenarios.batch import run_batch
     from scenarios.cast import cast
     from scenarios.schema import load_scenario
-    from scenarios.studies import play_task, study_tasks, summarise
+    from scenarios.studies import play_task, study_tasks, summarise, summarise_search
 
     for profile in args.netem or ():
         load_profile(profile)
@@ -52,8 +53,28 @@ def run(args) -> int:
     with tqdm(total=len(tasks), desc=args.study, unit="game", file=sys.stderr) as bar:
         results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers,
                             on_result=lambda r: bar.update(1))  # fmt: skip
-    rows = summarise(results.values())
-    (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
+    if args.study == "search":
+        rows = summarise_search(results.values())
+        (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
+        _print_search(rows)
+    else:
+        rows = summarise(results.values())
+        (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
+        _print_goes(rows)
+    print(f"per-game results in {out}/results.jsonl; replay one with bearcat simulate SCENARIO --seed S --netem P")
+    return 0
+
+
+def _print_search(rows) -> None:
+    print(f"{'search':<14}{'games':>6}{'found':>7}{'median s':>10}{'mean s':>8}{'attacker wins':>15}")
+    for r in rows:
+        median = "-" if r["median_time_to_find"] is None else f"{r['median_time_to_find']:.1f}"
+        mean = "-" if r["mean_time_to_find"] is None else f"{r['mean_time_to_find']:.1f}"
+        print(f"{r['search']:<14}{r['games']:>6}{r['found']:>7}{median:>10}{mean:>8}"
+              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%)")  # fmt: skip
+
+
+def _print_goes(rows) -> None:
     print(f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}"
           f"{'really open':>13}{'of them won':>13}")  # fmt: skip
     for r in rows:
@@ -61,5 +82,3 @@ def run(args) -> int:
         print(f"{r['scenario']:<26}{r['netem'] or 'its own':<13}{r['games']:>6}"
               f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate:<6}"
               f"{r['goes_really_open']:>13}{r['really_open_won']:>13}")  # fmt: skip
-    print(f"per-game results in {out}/results.jsonl; replay one with bearcat simulate SCENARIO --seed S --netem P")
-    return 0
