@@ -67,9 +67,9 @@ BEHAVIOUR_OPTIONS = {
     "follow-guidance": {},
     "direct": {"standoff": 6.0, "share": 0.5, "lead": 1.5},
     "fake-out": {"turn_every": 1.5, "spread": 100.0, "margin": 0.0},
-    "go-no-go": {"hold": None, "fresh": 2.0, "margin": 0.0},
+    "go-no-go": {"hold": None, "fresh": 2.0, "margin": 0.0, "flee": 0.0},
     "waypoints": {"points": None, "loop": False},
-    "patrol": {"points": None, "standoff": 6.0, "share": 0.5, "lead": 1.5, "memory": 5.0},
+    "patrol": {"points": None, "standoff": 6.0, "share": 0.5, "lead": 1.5, "memory": 5.0, "wander": False},
     "keyboard": {},
 }
 _AGENT_KEYS = {
@@ -268,6 +268,7 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
         options["hold"] = c.point(options["hold"], f"{at}.options.hold")
         options["fresh"] = c.number(options, "fresh", f"{at}.options", positive=True)
         options["margin"] = c.number(options, "margin", f"{at}.options")
+        options["flee"] = c.number(options, "flee", f"{at}.options")
     elif behaviour in ("waypoints", "patrol"):
         points = options["points"]
         if not isinstance(points, list) or not points:
@@ -282,6 +283,7 @@ def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
             checked["loop"] = c.boolean(options, "loop", f"{at}.options", default=False)
         else:
             checked.update({k: c.number(options, k, f"{at}.options") for k in ("standoff", "share", "lead", "memory")})
+            checked["wander"] = c.boolean(options, "wander", f"{at}.options", default=False)
         options = checked
     elif behaviour == "direct":
         options = {k: c.number(options, k, f"{at}.options") for k in options}

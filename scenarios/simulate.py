@@ -62,8 +62,11 @@ def simulate(
     netem: str | None = None,
     events: str | Path | None = None,
     ctf_progress=None,
+    inspect=None,
 ) -> Outcome:
-    """Play ``scenario`` once; ``events`` is the path of the event log to write."""
+    """Play ``scenario`` once; ``events`` is the path of the event log to
+    write. ``inspect(now, players)``, if given, looks at every agent's state
+    ten times a second (tests check invariants against the truth with it)."""
     seed = scenario.seed if seed is None else int(seed)
     profile = load_profile(netem or scenario.netem)
     players = cast(scenario, profile, seed, ctf_progress=ctf_progress)
@@ -150,8 +153,15 @@ def simulate(
             for call, d in shim.poll(env.now):
                 env.timeout(max(d.at - env.now, 0.0)).callbacks.append(arrive(call, d.payload))
 
+    def inspector():
+        while True:
+            yield env.timeout(POLL)
+            inspect(env.now, players)
+
     for agent, session in sessions:
         env.process(ticker(agent, session))
+    if inspect is not None:
+        env.process(inspector())
     if zones is not None:
         env.process(poller())
     start = Control(t=0.0, command="start")

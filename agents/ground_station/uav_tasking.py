@@ -19,6 +19,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+import shapely
+import shapely.ops
 from scipy.interpolate import RegularGridInterpolator
 
 from agents.protocol import Send
@@ -84,6 +86,8 @@ class UavTasker:
         self.grid, self.terrain = raster.grid, raster.speed
         self.free = self.terrain > 0
         self._nodes = np.stack(np.meshgrid(*self.grid.axes(), indexing="ij"), axis=-1)
+        # Free space shrunk by a node, so a point moved into it lands on free nodes.
+        self._inside = game_map.free_space.buffer(-max(self.grid.spacing))
         self.possible = search.PossibleDefender.around(self.terrain, self.grid, defender_start, PRIOR_RADIUS)
         self.picture = Picture(possible=self.possible.mask, strategy=strategy)
         self.running = False
@@ -121,7 +125,7 @@ class UavTasker:
     def tick(self, now: float) -> list[Send]:
         if self.ended or not self.running or self.attacker not in self._fixes or self.uav not in self._fixes:
             return []
-        a, uav = self._fixes[self.attacker][0], self._fixes[self.uav][0]
+        a, uav = self._placeable(self._fixes[self.attacker][0]), self._fixes[self.uav][0]
         seen_a = search.visibility(self.free, self.grid, a)
         seen_q = search.footprint(self.grid, uav, self.camera_radius)
         dt = 0.0 if self._last_update is None else now - self._last_update
@@ -151,10 +155,18 @@ class UavTasker:
 
     def _sighted(self, where: np.ndarray, t: float, by: str) -> None:
         if self._seen is None or t > self._seen[1]:
-            self._seen = (where, t)
+            self._seen = (self._placeable(where), t)
             if self.picture.found_at is None:
                 self.picture.found_at = t
             self.picture.sightings.append((t, by))
+
+    def _placeable(self, p: np.ndarray) -> np.ndarray:
+        """``p``, or the nearest free point if GPS error put the fix in a
+        building or off the map (a phone still shows its owner somewhere)."""
+        p = np.clip(p, self.grid.lo, self.grid.hi)
+        if self.free[self.grid.nearest_index(p)]:
+            return p
+        return np.asarray(shapely.ops.nearest_points(self._inside, shapely.Point(p))[0].coords[0])
 
     # ------------------------------------------------------------------ where next
 

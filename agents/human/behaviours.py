@@ -18,9 +18,9 @@ direction (east, north) or None to stand still.
   says go with opponent data fresher than a threshold, then commit to the
   heading for good.
 - ``waypoints``: visit points in turn (and loop).
-- ``patrol`` (thesis 6.2.4): walk a route round and round while no opponent
-  is in sight; play ``direct`` against one seen in the last ``memory``
-  seconds.
+- ``patrol`` (thesis 6.2.4): walk a route round and round, or wander
+  between its points at random, while no opponent is in sight; play
+  ``direct`` against one seen in the last ``memory`` seconds.
 - ``keyboard``: arrow keys or WASD set the direction; the runtime feeds keys.
 """
 
@@ -157,14 +157,17 @@ class FakeOut:
 class GoNoGo:
     """Hold at ``hold`` until the display says go, by at least ``margin``
     metres of the solver's value, with every opponent's report younger than
-    ``fresh`` seconds; then commit for good. ``committed_at`` records when."""
+    ``fresh`` seconds; then commit for good. ``committed_at`` records when.
+    Until then, an opponent shown within ``flee`` metres with a fresh report
+    is run from (0: stand one's ground)."""
 
     name = "go-no-go"
 
-    def __init__(self, hold, fresh: float = 2.0, margin: float = 0.0) -> None:
+    def __init__(self, hold, fresh: float = 2.0, margin: float = 0.0, flee: float = 0.0) -> None:
         self.hold = np.asarray(hold, float)
         self.fresh = float(fresh)
         self.margin = float(margin)
+        self.flee = float(flee)
         self.committed_at: float | None = None
 
     def decide(self, now, me, screen, situation):
@@ -175,6 +178,10 @@ class GoNoGo:
                 self.committed_at = now
         if self.committed_at is not None:
             return screen.heading if screen.heading is not None else situation.navigator.toward(situation.goal, me)
+        near = [o for o in situation.opponents if screen.age(o, now) <= self.fresh
+                and np.hypot(*(screen.reports[o].position - me)) <= self.flee]  # fmt: skip
+        if near:
+            return _flee(me, screen, situation)
         if np.hypot(*(self.hold - me)) <= ARRIVED:
             return None
         return situation.navigator.toward(tuple(self.hold), me)
@@ -201,17 +208,32 @@ class Waypoints:
 
 
 class Patrol:
+    """Walk the ``points`` in turn (or, with ``wander``, each next one drawn
+    at random among the others, so the route cannot be learnt) until an
+    opponent is on the screen; then play ``direct``."""
+
     name = "patrol"
 
-    def __init__(self, points, memory: float = 5.0, **direct) -> None:
-        self.route = Waypoints(points, loop=True)
+    def __init__(self, points, rng: np.random.Generator, memory: float = 5.0, wander: bool = False, **direct) -> None:
+        self.points = [np.asarray(p, float) for p in points]
+        self.rng = rng
+        self.wander = wander
         self.direct = Direct(**direct)
         self.memory = float(memory)
+        self.index = int(rng.integers(len(self.points))) if wander else 0
 
     def decide(self, now, me, screen, situation):
         if any(screen.age(o, now) <= self.memory for o in situation.opponents):
             return self.direct.decide(now, me, screen, situation)
-        return self.route.decide(now, me, screen, situation)
+        if np.hypot(*(self.points[self.index] - me)) <= ARRIVED:
+            self.index = self._next()
+        return situation.navigator.toward(tuple(self.points[self.index]), me)
+
+    def _next(self) -> int:
+        if not self.wander or len(self.points) == 1:
+            return (self.index + 1) % len(self.points)
+        others = [k for k in range(len(self.points)) if k != self.index]
+        return int(self.rng.choice(others))
 
 
 KEYS = {
@@ -253,7 +275,7 @@ def make(name: str, options: dict, rng: np.random.Generator):
     if name == "waypoints":
         return Waypoints(**options)
     if name == "patrol":
-        return Patrol(**options)
+        return Patrol(rng=rng, **options)
     if name == "keyboard":
         return Keyboard()
     raise ValueError(f"there is no behaviour {name!r}")

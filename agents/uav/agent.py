@@ -75,6 +75,7 @@ class UavAgent:
         self._heard = -math.inf
         self._task_seq = -1
         self._seen: dict[str, float] = {}  # agent -> time of the last detection sent
+        self._origin: tuple[float, float] | None = None
 
     # ------------------------------------------------------------------ agent protocol
 
@@ -175,8 +176,12 @@ class UavAgent:
         s = self.state
         if s is None or not s.in_air or now - self._seen.get(truth.agent, -math.inf) < 1.0:
             return []
-        east, north = to_local(truth.lat, truth.lon, (s.lat, s.lon))
-        if np.hypot(east, north) > self.camera_radius:
+        # Distances in one local frame, centred where the UAV was first seen
+        # (a frame per position would cost a projection set-up per look).
+        self._origin = self._origin or (s.lat, s.lon)
+        east, north = to_local(truth.lat, truth.lon, self._origin)
+        ue, un = to_local(s.lat, s.lon, self._origin)
+        if np.hypot(east - ue, north - un) > self.camera_radius:
             return []
         self._seen[truth.agent] = now
         seen = Detection(uav=self.name, t=now, agent=truth.agent, lat=truth.lat, lon=truth.lon)

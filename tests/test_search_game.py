@@ -1,0 +1,112 @@
+"""The limited-visibility game with a UAV (thesis 6.2.4), played in simulation:
+P_D against the defender's true track, what each side is told, the UAV's
+tasks and detections. The built-in search scenario on a 25-point grid, so
+the capture-the-flag solve takes seconds."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from agents.ground_station.recorder import read_events
+from agents.ground_station.uav_tasking import TRACK_FOR
+from scenarios.schema import ScenarioError, load_scenario, parse_scenario
+from scenarios.simulate import simulate
+
+
+def _text(**changes) -> str:
+    text = load_scenario("search").text.replace("grid = 45", "grid = 25").replace('netem = "3g"', 'netem = "ideal"')
+    text = text.replace("time_limit = 240.0", "time_limit = 90.0")
+    for old, new in changes.items():
+        assert old in text, old
+        text = text.replace(old, new)
+    return text
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return parse_scenario(_text(), source="search.toml")
+
+
+@pytest.mark.parametrize("search", ["reachability", "nearest"])
+def test_the_possible_set_always_holds_the_defender_while_it_is_unseen(scenario, search):
+    """Checked against the truth ten times a second: wherever the defender
+    really is, P_D has a node within a cell, plus the metres the defender
+    walks in the second a fix may be old (sensing runs on fixes)."""
+    scenario = replace(scenario, uavs=tuple(replace(u, search=search) for u in scenario.uavs))
+    checked, seen_updates = [], {"n": -1}
+
+    def inspect(now, players):
+        (tasker,) = players.tasking
+        picture = tasker.picture
+        if picture.updates == seen_updates["n"] or picture.possible is None:
+            return
+        seen_updates["n"] = picture.updates
+        last = picture.sightings[-1][0] if picture.sightings else -math.inf
+        if now - last <= TRACK_FOR + 1.0:
+            return  # P_D sits on the sighting
+        truth = players.people["defender"].walker.position
+        nodes = np.argwhere(picture.possible)
+        assert len(nodes), f"P_D is empty at {now:.1f} s while the defender is unseen"
+        points = np.asarray(tasker.grid.lo) + nodes * np.asarray(tasker.grid.spacing)
+        slack = max(tasker.grid.spacing) * math.sqrt(2) + tasker.defender_speed * 1.0
+        gap = float(np.min(np.hypot(*(points - truth).T)))
+        assert gap <= slack, f"at {now:.1f} s the defender at {truth.round(1)} is {gap:.1f} m outside P_D"
+        checked.append(now)
+
+    simulate(scenario, seed=1, inspect=inspect)
+    assert len(checked) >= 10  # the search really ran
+
+
+def test_the_attacker_is_told_of_the_defender_only_after_its_side_saw_it(scenario, tmp_path):
+    for seed in range(6):  # the first game in which the UAV or the attacker finds the defender
+        events = tmp_path / f"events-{seed}.jsonl"
+        found = simulate(scenario, seed=seed, events=events).notes.get("q1.found_at")
+        if found is not None:
+            break
+    assert found is not None, "the defender was never found in six games"
+    told = [e for e in read_events(events) if e["event"] == "sent" and e["message"].get("type") == "guidance"
+            and e["message"]["agent"] == "attacker"
+            and any(r["agent"] == "defender" for r in e["message"]["reports"])]  # fmt: skip
+    assert told, "the attacker never learnt where the defender was"
+    assert min(e["t"] for e in told) >= found - 1e-9
+    everyone = [e for e in read_events(events) if e["event"] == "sent" and e["message"].get("type") == "guidance"
+                and e["message"]["agent"] == "attacker"]  # fmt: skip
+    assert all(e["message"]["game"] == "search" and e["message"]["possible"] for e in everyone[:20])
+    assert any(r["agent"] == "q1" for r in everyone[-1]["message"]["reports"])  # its UAV, always
+
+
+def test_the_uav_climbs_searches_once_a_second_and_its_camera_finds_the_defender(scenario, tmp_path):
+    events = tmp_path / "events.jsonl"
+    outcome = simulate(scenario, seed=0, events=events)
+    log = read_events(events)
+    uav_truth = [e["message"] for e in log if e["event"] == "sent" and e["message"].get("type") == "truth"
+                 and e["message"]["agent"] == "q1"]  # fmt: skip
+    assert max(m["alt"] for m in uav_truth) == pytest.approx(20.0, abs=0.6)
+    tasks = [e["t"] for e in log if e["event"] == "sent" and e["message"].get("type") == "uav-task"]
+    assert len(tasks) >= 0.8 * (tasks[-1] - tasks[0]) and np.all(np.diff(tasks) > 0.5)
+    detections = [e["message"] for e in log if e["event"] == "sent" and e["message"].get("type") == "detection"]
+    if outcome.notes.get("q1.found_by") == "q1":
+        assert detections and detections[0]["agent"] == "defender"
+    for d in detections:  # the camera reported the truth, within r_q of the UAV
+        t = next(e["t"] for e in log if e["event"] == "sent" and e["message"] is d)
+        near = min((m for m in uav_truth), key=lambda m: abs(m["t"] - t))
+        east, north = scenario.map.to_local(d["lat"], d["lon"])
+        ue, un = scenario.map.to_local(near["lat"], near["lon"])
+        assert math.hypot(east - ue, north - un) <= 15.0 + 1.0
+
+
+def test_uav_tables_are_checked_key_by_key():
+    with pytest.raises(ScenarioError, match=r"uav\[0\]\.search 'random' is not one of reachability, lawnmower, nearest"):
+        parse_scenario(_text(**{'search = "reachability"': 'search = "random"'}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"uav\[0\]\.start \[300.0, 12.0\] is off map campus-250x200"):
+        parse_scenario(_text(**{"start = [125.0, 12.0]": "start = [300.0, 12.0]"}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"uav\[0\]\.camera is not a known key"):
+        parse_scenario(_text(**{"camera_radius = 15.0": "camera = 15.0"}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"agent id 'attacker' is used twice"):
+        parse_scenario(_text(**{'id = "q1"': 'id = "attacker"'}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"rules.visibility 'none' is not one of full, line-of-sight"):
+        parse_scenario(_text(**{'visibility = "line-of-sight"': 'visibility = "none"'}), source="s.toml")
