@@ -196,7 +196,7 @@ class _CtfGame:
         return UavAgent(
             self.scenario.name, spec.id, autopilot, altitude=spec.altitude, camera_radius=spec.camera_radius,
             watch=opponents, fix_rate=spec.fix_rate, failsafe=spec.failsafe, link_timeout=spec.link_timeout,
-            truth=truth,
+            truth=truth, steer=spec.steer, speed=spec.speed,
         )  # fmt: skip
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:

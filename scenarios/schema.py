@@ -33,6 +33,7 @@ whether their phone shows reachability guidance::
     altitude = 20.0              # m above home
     camera_radius = 15.0         # r_q: the camera sees a disk this wide on the ground
     search = "reachability"      # reachability | lawnmower | nearest
+    steer = "goto"               # goto | velocity (offboard setpoints)
 
 Every error is one sentence naming the file and the key, such as
 ``fake-out.toml: agent[1].behaviour 'fakeout' is not one of ...``.
@@ -46,7 +47,7 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from agents.uav.agent import FAILSAFES
+from agents.uav.agent import FAILSAFES, STEERING
 from maps import Map, MapError, load_map
 from netem.profiles import ProfileError, load_profile
 
@@ -80,7 +81,7 @@ _AGENT_KEYS = {
 # UAV keys and their defaults (None: required).
 UAV_KEYS = {
     "id": None, "team": None, "start": None, "altitude": 20.0, "camera_radius": 15.0, "speed": 8.0, "accel": 3.0,
-    "search": "reachability", "failsafe": "hold", "link_timeout": 5.0, "fix_rate": 2.0,
+    "search": "reachability", "failsafe": "hold", "link_timeout": 5.0, "fix_rate": 2.0, "steer": "goto",
 }  # fmt: skip
 
 
@@ -119,6 +120,7 @@ class UavSpec:
     failsafe: str = "hold"
     link_timeout: float = 5.0
     fix_rate: float = 2.0
+    steer: str = "goto"
 
 
 @dataclass(frozen=True)
@@ -331,6 +333,7 @@ def _uav(c: _Checker, raw, k: int, game: str, game_map: Map) -> UavSpec:
         failsafe=c.choice(given, "failsafe", FAILSAFES, at),
         link_timeout=c.number(given, "link_timeout", at, positive=True),
         fix_rate=c.number(given, "fix_rate", at, positive=True),
+        steer=c.choice(given, "steer", STEERING, at),
     )
 
 

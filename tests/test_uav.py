@@ -238,6 +238,31 @@ def test_mavsdk_client_arms_takes_off_flies_a_goto_and_lands(vehicle):
     assert "0 undecodable" in vehicle.stop()
 
 
+def test_mavsdk_client_steers_by_offboard_velocity_to_a_point(vehicle):
+    async def scenario():
+        autopilot = MavsdkAutopilot(vehicle.url)
+        await autopilot.connect(timeout=10.0)
+        try:
+            agent = _agent(autopilot, link_timeout=60.0, steer="velocity", speed=6.0)
+            _start(agent)
+            await _fly(agent, 15.0, until=lambda s: s.in_air and s.alt > 4.5 and s.mode == "hold")
+            agent.handle(keys.uav_task(GAME, "q1"), _task(1, 25.0, -10.0), time.monotonic())
+            modes = set()
+
+            def there(s):
+                modes.add(s.mode)
+                return math.dist(to_local(s.lat, s.lon, HOME[:2]), (25.0, -10.0)) < 1.0 and s.speed < 0.3
+
+            await _fly(agent, 20.0, until=there)
+            assert "offboard" in modes and autopilot.failure is None
+            agent.handle(keys.uav_task(GAME, "q1"), _task(2, 0.0, 0.0, kind="land"), time.monotonic())
+            await _fly(agent, 20.0, until=lambda s: not s.armed)
+        finally:
+            await autopilot.close()
+
+    asyncio.run(scenario())
+
+
 @pytest.mark.parametrize("failsafe", ["land", "hold"])
 def test_a_silent_ground_station_triggers_the_failsafe(vehicle, failsafe):
     async def scenario():

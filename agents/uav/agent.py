@@ -3,7 +3,9 @@ tasked by the ground station, used as an aerial camera (thesis 2, 6.2).
 
 On the start command it takes off to its altitude; each task from the
 ground station sends it somewhere (a search target or a waypoint), holds
-it or lands it. Its telemetry goes out as fixes on its own fix key, so the
+it or lands it. It ``steer``s there by ``goto`` (the autopilot flies to the
+point) or by ``velocity`` (offboard velocity setpoints ten times a second
+on a braking curve toward the point, the way a companion computer steers). Its telemetry goes out as fixes on its own fix key, so the
 ground station and the phones see it like any agent. Its camera sees a
 disk of radius ``r_q`` on the ground (V_Q of 6.2.2): an opponent whose
 true position lies in it while the UAV flies is reported as a detection
@@ -30,6 +32,8 @@ from bus.messages import Control, Detection, Fix, GameState, Message, Truth, Uav
 from maps.geodesy import to_local
 
 FAILSAFES = ("hold", "return", "land")
+STEERING = ("goto", "velocity")
+BRAKING = 2.0  # m/s^2 the velocity steering plans to brake at
 
 
 class UavAgent:
@@ -48,9 +52,15 @@ class UavAgent:
         failsafe: str = "hold",
         link_timeout: float = 5.0,
         truth: bool = False,
+        steer: str = "goto",
+        speed: float = 8.0,
     ) -> None:
         if failsafe not in FAILSAFES:
             raise ValueError(f"failsafe {failsafe!r} is not one of {', '.join(FAILSAFES)}")
+        if steer not in STEERING:
+            raise ValueError(f"steer {steer!r} is not one of {', '.join(STEERING)}")
+        self.steer, self.speed = steer, float(speed)
+        self.target: tuple[float, float, float] | None = None  # lat, lon, altitude of a velocity-steered task
         self.game, self.name = game, name
         self.autopilot = autopilot
         self.altitude = float(altitude)
@@ -114,6 +124,8 @@ class UavAgent:
         lost = now - self._heard > self.link_timeout
         if lost and self.flying and not self.ended and self.failsafe_at is None:
             self._fail_safe(now, f"nothing from the ground station for {self.link_timeout:g} s")
+        if self.target is not None and self.state is not None and self.state.in_air and self.failsafe_at is None:
+            self.autopilot.velocity(*self._steering(self.state))
         s = self.state
         if s is None:
             return []
@@ -142,12 +154,33 @@ class UavAgent:
         if self.failsafe_at is not None:
             self.events.append((now, "the ground station is back"))
             self.failsafe_at = None
+        self.target = None
         if task.kind == "land":
             self._land(now, "told to land")
         elif task.kind == "hold":
             self.autopilot.hold()
+        elif self.flying and self.steer == "velocity":
+            self.target = (task.lat, task.lon, task.alt if task.alt > 0 else self.altitude)
         elif self.flying:
             self.autopilot.goto(task.lat, task.lon, task.alt if task.alt > 0 else self.altitude)
+
+    def _steering(self, s: VehicleState) -> tuple[float, float, float]:
+        """The velocity toward the target: as fast as the vehicle may go while
+        it can still brake before the point; climb or descend to its altitude."""
+        lat, lon, alt = self.target
+        east, north = to_local(lat, lon, self._frame(s))
+        here = to_local(s.lat, s.lon, self._frame(s))
+        d = np.array([east - here[0], north - here[1]])
+        distance = float(np.hypot(*d))
+        speed = min(self.speed, math.sqrt(2 * BRAKING * distance), distance)
+        horizontal = d / distance * speed if distance > 1e-6 else np.zeros(2)
+        return float(horizontal[0]), float(horizontal[1]), float(np.clip(alt - s.alt, -1.5, 2.0))
+
+    def _frame(self, s: VehicleState) -> tuple[float, float]:
+        """One local frame for all distances, centred where the UAV was first
+        seen (a frame per position would cost a projection set-up per look)."""
+        self._origin = self._origin or (s.lat, s.lon)
+        return self._origin
 
     def _take_off(self, now: float) -> None:
         self.flying = True
@@ -155,6 +188,7 @@ class UavAgent:
         self.events.append((now, f"taking off to {self.altitude:g} m"))
 
     def _land(self, now: float, why: str) -> None:
+        self.target = None
         if self.flying:
             self.autopilot.land()
             self.events.append((now, f"landing: {why}"))
@@ -162,6 +196,7 @@ class UavAgent:
 
     def _fail_safe(self, now: float, why: str) -> None:
         self.failsafe_at = now
+        self.target = None
         self.events.append((now, f"failsafe {self.failsafe}: {why}"))
         {"hold": self.autopilot.hold, "return": self.autopilot.return_home, "land": self.autopilot.land}[
             self.failsafe
@@ -176,11 +211,8 @@ class UavAgent:
         s = self.state
         if s is None or not s.in_air or now - self._seen.get(truth.agent, -math.inf) < 1.0:
             return []
-        # Distances in one local frame, centred where the UAV was first seen
-        # (a frame per position would cost a projection set-up per look).
-        self._origin = self._origin or (s.lat, s.lon)
-        east, north = to_local(truth.lat, truth.lon, self._origin)
-        ue, un = to_local(s.lat, s.lon, self._origin)
+        east, north = to_local(truth.lat, truth.lon, self._frame(s))
+        ue, un = to_local(s.lat, s.lon, self._frame(s))
         if np.hypot(east - ue, north - un) > self.camera_radius:
             return []
         self._seen[truth.agent] = now

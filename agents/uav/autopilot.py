@@ -52,6 +52,8 @@ class Autopilot(Protocol):
 
     def goto(self, lat: float, lon: float, altitude: float) -> None: ...
 
+    def velocity(self, east: float, north: float, up: float) -> None: ...
+
     def hold(self) -> None: ...
 
     def return_home(self) -> None: ...
@@ -95,6 +97,12 @@ class SimulatedAutopilot:
         east, north = to_local(lat, lon, self.home)
         self._check("go to", self.flight.reposition(east, north, altitude))
 
+    def velocity(self, east: float, north: float, up: float) -> None:
+        now = self._now or 0.0
+        self.flight.offboard(now, "velocity", (east, north, up))
+        if self.flight.main != Main.OFFBOARD:
+            self._check("offboard", self.flight.set_mode(Main.OFFBOARD, 0, now))
+
     def hold(self) -> None:
         self._check("hold", self.flight.hold())
 
@@ -121,11 +129,14 @@ class MavsdkAutopilot:
         self._queue: asyncio.Queue | None = None
         self._tasks: list[asyncio.Task] = []
         self._mavsdk = None
+        self._offboard = False
+        self._yaw = 0.0
 
     async def connect(self, timeout: float = 20.0) -> None:
         """Wait for the vehicle (raises TimeoutError naming the URL)."""
         from mavsdk.asyncio import ComponentType, Configuration, Mavsdk
         from mavsdk.asyncio.plugins.action import ActionAsync
+        from mavsdk.asyncio.plugins.offboard import OffboardAsync
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         _route_mavsdk_logs()
@@ -136,7 +147,7 @@ class MavsdkAutopilot:
         if system is None:
             await self.close()
             raise TimeoutError(f"no vehicle answered on {self.url} within {timeout:g} s")
-        self.action, self.telemetry = ActionAsync(system), TelemetryAsync(system)
+        self.action, self.telemetry, self.offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
         self._queue = asyncio.Queue()
         self._tasks = [asyncio.create_task(self._work())] + [
             asyncio.create_task(self._follow(name)) for name in ("position", "velocity_ned", "armed", "in_air",
@@ -187,16 +198,38 @@ class MavsdkAutopilot:
     def goto(self, lat: float, lon: float, altitude: float) -> None:
         home = self._state.get("position")
         base = 0.0 if home is None else home.absolute_altitude_m - home.relative_altitude_m
+        self._leave_offboard()
         self._do("go to", self.action.goto_location, lat, lon, base + altitude, float("nan"))
 
+    def velocity(self, east: float, north: float, up: float) -> None:
+        """An offboard velocity setpoint; MAVSDK repeats the latest at 20 Hz,
+        as PX4 needs, and the first one starts offboard mode."""
+        from mavsdk.asyncio.plugins.offboard import VelocityNedYaw
+
+        yaw = math.degrees(math.atan2(east, north)) if math.hypot(east, north) > 0.5 else self._yaw
+        self._yaw = yaw
+        self._do("offboard", self.offboard.set_velocity_ned, VelocityNedYaw(north, east, -up, yaw))
+        if not self._offboard:
+            self._offboard = True
+            self._do("offboard", self.offboard.start)
+
     def hold(self) -> None:
+        self._leave_offboard()
         self._do("hold", self.action.hold)
 
     def return_home(self) -> None:
+        self._leave_offboard()
         self._do("return", self.action.return_to_launch)
 
     def land(self) -> None:
+        self._leave_offboard()
         self._do("land", self.action.land)
+
+    def _leave_offboard(self) -> None:
+        """Stop MAVSDK's setpoint stream (the mode change that follows takes the vehicle out of offboard)."""
+        if self._offboard:
+            self._offboard = False
+            self._do("offboard", self.offboard.stop)
 
     def _do(self, what: str, call, *args) -> None:
         if self._queue is not None:
