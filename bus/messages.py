@@ -89,8 +89,10 @@ class Guidance(Message, tag="guidance"):
     of the safe set, ...); ``boundary`` open lines to show (a pursuer's active
     boundary, a planned path); ``reports`` every agent as last reported (in a
     game of limited visibility, as last seen by the agent's side);
-    ``possible`` where an unseen opponent may be (P_D of thesis 6.2);
-    ``seen_by`` the opponents' UAVs that have just seen this agent."""
+    ``possible`` where an unseen opponent may be (P_D of thesis 6.2), and
+    ``worst_case`` whether ``value``, ``heading`` and ``go`` hold against
+    every one of those places; ``seen_by`` the opponents' UAVs that have
+    just seen this agent."""
 
     agent: Name
     seq: Sequence
@@ -104,6 +106,7 @@ class Guidance(Message, tag="guidance"):
     boundary: Lines = []
     reports: Annotated[list[Report], msgspec.Meta(max_length=64)] = []
     possible: Lines = []
+    worst_case: bool = False
     seen_by: Annotated[list[Name], msgspec.Meta(max_length=64)] = []
     note: Text = ""
 

@@ -8,6 +8,7 @@ and the agent's name, so adding an agent does not change another's draws.
 
 from __future__ import annotations
 
+import math
 import zlib
 from dataclasses import dataclass, field
 
@@ -128,6 +129,16 @@ class _CtfGame:
             game_map, self.attacker.speed, self.defender.speed,
             capture_radius=r["capture_radius"], capture_time=r["capture_time"], return_time=r["return_time"],
         )  # fmt: skip
+        xmin, ymin, xmax, ymax = game_map.bounds
+        cell = max(xmax - xmin, ymax - ymin) / (r["grid"] - 1)
+        if self.rules.capture_radius < cell - 1e-9:
+            # The 4-D solver sees capture only where the radius spans a cell;
+            # below that the defender's winning set all but vanishes.
+            raise ScenarioError(
+                f"{scenario.source}: rules.capture_radius {self.rules.capture_radius:g} m is less than a cell of the "
+                f"{r['grid']}-point grid on map {game_map.name} ({cell:.2f} m), too coarse to resolve capture; "
+                f"raise rules.grid to at least {math.ceil(max(xmax - xmin, ymax - ymin) / self.rules.capture_radius) + 1} or the radius"
+            )
         self.flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
         self.home = shapely.union_all([g.geometry for g in game_map.regions_with_role("return")])
         self.flag_taken = r["stages"] == "return"
@@ -186,7 +197,7 @@ class _CtfGame:
                 s.name, s.map, uav=u.id, attacker=self.attacker.id, defender=self.defender.id,
                 defender_start=self.defender.start, defender_speed=self.defender.speed, uav_speed=u.speed,
                 camera_radius=u.camera_radius, altitude=u.altitude, strategy=u.search,
-                ctf=self.solved() if u.search == "reachability" else None, sight=self.sight, name=f"tasking-{u.id}",
+                ctf=self.solved(), sight=self.sight, name=f"tasking-{u.id}",
             )
             for u in s.uavs
         ]  # fmt: skip

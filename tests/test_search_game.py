@@ -1,6 +1,6 @@
 """The limited-visibility game with a UAV (thesis 6.2.4), played in simulation:
 P_D against the defender's true track, what each side is told, the UAV's
-tasks and detections. The built-in search scenario on a 25-point grid, so
+tasks and detections. The built-in search scenario on a 35-point grid, so
 the capture-the-flag solve takes seconds."""
 
 from __future__ import annotations
@@ -18,7 +18,7 @@ from scenarios.simulate import simulate
 
 
 def _text(**changes) -> str:
-    text = load_scenario("search").text.replace("grid = 45", "grid = 25").replace('netem = "3g"', 'netem = "ideal"')
+    text = load_scenario("search").text.replace("grid = 45", "grid = 35").replace('netem = "3g"', 'netem = "ideal"')
     text = text.replace("time_limit = 240.0", "time_limit = 90.0")
     for old, new in changes.items():
         assert old in text, old
@@ -110,3 +110,44 @@ def test_uav_tables_are_checked_key_by_key():
         parse_scenario(_text(**{'id = "q1"': 'id = "attacker"'}), source="s.toml")
     with pytest.raises(ScenarioError, match=r"rules.visibility 'none' is not one of full, line-of-sight"):
         parse_scenario(_text(**{'visibility = "line-of-sight"': 'visibility = "none"'}), source="s.toml")
+
+
+def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario):
+    """The phone's value is the worst over P_D: go with P_D in a corner where
+    the defender loses, no go once P_D also holds a place where it wins."""
+    from agents.ground_station.guidance import _Fixes
+    from bus.messages import Fix
+    from scenarios.cast import _CtfGame
+
+    game = _CtfGame(scenario)
+    advisor = game.guidance().advisor
+    (tasker,) = game.tasking()
+    solved = game.solved()
+    attacker = np.array([125.0, 150.0])  # north of the hall, 35 m short of home
+    fixes = _Fixes(scenario.map)
+    lat, lon = scenario.map.to_geodetic(*attacker)
+    fixes.take(Fix(agent="attacker", seq=1, t=1.0, lat=lat, lon=lon))
+    x, y = np.meshgrid(*tasker.grid.axes(), indexing="ij")
+
+    def answer(*centres):
+        tasker.picture.possible = np.any([np.hypot(x - cx, y - cy) <= 6.0 for cx, cy in centres], axis=0)
+        tasker.picture.updates += 1
+        return advisor("attacker", fixes, 2.0)
+
+    far = answer((30.0, 20.0))  # the south-west corner, behind the buildings
+    assert far["worst_case"] and far["go"] and far["value"] <= 0
+    assert solved.evaluate(attacker, (30.0, 20.0), "return").value <= 0
+    both = answer((30.0, 20.0), (125.0, 170.0))  # and between the attacker and home
+    assert both["worst_case"] and not both["go"] and both["value"] > 0
+    assert both["value"] == pytest.approx(max(solved.evaluate(attacker, d, "return").value
+                                              for d in np.argwhere(tasker.picture.possible)
+                                              * np.asarray(tasker.grid.spacing) + np.asarray(tasker.grid.lo)), abs=0.3)
+
+
+def test_a_capture_radius_the_grid_cannot_resolve_is_refused():
+    from scenarios.cast import _CtfGame
+
+    coarse = parse_scenario(_text(**{"capture_radius = 7.5": "capture_radius = 5.0"}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"capture_radius 5 m is less than a cell of the 35-point grid on map "
+                                            r"campus-250x200 \(7.35 m\).*at least 51"):
+        _CtfGame(coarse)

@@ -189,11 +189,30 @@ class UavTasker:
             self._sweep_index = (self._sweep_index + 1) % len(self._sweep)
         return tuple(float(v) for v in self._sweep[self._sweep_index])
 
+    def worst_case(self, attacker) -> tuple[float, float] | None:
+        """The place in P_D where the defender would do best against an
+        attacker at ``attacker`` (None if P_D is empty or there is no solution)."""
+        possible = self.picture.possible
+        values = self._defender_values(self._placeable(np.asarray(attacker, float)))
+        if possible is None or values is None or not possible.any():
+            return None
+        masked = np.where(possible, values, -np.inf)
+        k = np.unravel_index(int(np.argmax(masked)), masked.shape)
+        return tuple(float(v) for v in self.grid.point(k))
+
     def _defender_wins(self, attacker) -> np.ndarray:
-        """W_D(x_a) from the solved game, resampled from its grid onto the search grid."""
+        """W_D(x_a) on the search grid."""
+        values = self._defender_values(attacker)
+        return np.zeros(self.grid.shape, dtype=bool) if values is None else (values > 0) & self.free
+
+    def _defender_values(self, attacker) -> np.ndarray | None:
+        """The solved game's value over defender positions with the attacker at
+        ``attacker`` (> 0: the defender wins), resampled onto the search grid."""
+        if self.ctf is None:
+            return None
         try:
             values = self.ctf.defender_region_values(attacker, self._phase)
         except InputError:  # the attacker's fix is off the solver's grid or in a building
-            return np.zeros(self.grid.shape, dtype=bool)
+            return None
         sample = RegularGridInterpolator(self.ctf.arena.grid.axes(), values, bounds_error=False, fill_value=-1.0)
-        return (sample(self._nodes) > 0) & self.free
+        return sample(self._nodes)

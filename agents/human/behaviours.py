@@ -157,7 +157,8 @@ class FakeOut:
 class GoNoGo:
     """Hold at ``hold`` until the display says go, by at least ``margin``
     metres of the solver's value, with every opponent's report younger than
-    ``fresh`` seconds; then commit for good. ``committed_at`` records when.
+    ``fresh`` seconds (or a go that holds wherever an unseen opponent may
+    be); then commit for good. ``committed_at`` records when.
     Until then, an opponent shown within ``flee`` metres with a fresh report
     is run from (0: stand one's ground)."""
 
@@ -172,7 +173,7 @@ class GoNoGo:
 
     def decide(self, now, me, screen, situation):
         if self.committed_at is None:
-            fresh = all(screen.age(o, now) <= self.fresh for o in situation.opponents)
+            fresh = screen.worst_case or all(screen.age(o, now) <= self.fresh for o in situation.opponents)
             clear = screen.value is not None and screen.value <= -self.margin
             if screen.go and clear and fresh and screen.heading is not None:
                 self.committed_at = now

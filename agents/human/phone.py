@@ -42,6 +42,7 @@ class Screen:
     region_of: str | None = None
     go: bool | None = None
     value: float | None = None
+    worst_case: bool = False  # value and go hold wherever the unseen opponent may be
     boundary: list[np.ndarray] = field(default_factory=list)
     reports: dict[str, Sighting] = field(default_factory=dict)
     note: str = ""
@@ -119,6 +120,7 @@ class Phone:
             self._region_local = [to_local(ring) for ring in guidance.region]
         s.region = self._region_local
         s.region_of, s.go, s.value, s.note = guidance.region_of, guidance.go, guidance.value, guidance.note
+        s.worst_case = guidance.worst_case
         s.boundary = [to_local(line) for line in guidance.boundary]
         for r in guidance.reports:
             old = s.reports.get(r.agent)
