@@ -81,7 +81,7 @@ import numba
 import numpy as np
 
 from solvers import fmm
-from solvers.errors import InputError
+from solvers.errors import InputError, non_negative, positive
 from solvers.grid import Grid
 
 __all__ = [
@@ -207,7 +207,7 @@ class FmmArena:
 
     def capture_time(self, point, radius: float) -> np.ndarray:
         """``psi^c`` at speed factor 1 of a pursuer at ``point`` with capture ``radius``."""
-        return self._capture(self._front(self._point(point, "point")), _radius(radius))
+        return self._capture(self._front(self._point(point, "point")), non_negative(radius, "capture radius"))
 
     # ------------------------------------------------------------------ fronts
 
@@ -384,7 +384,7 @@ def safe_set(
     e = arena._point(evader, "evader")
     ps = arena._points(pursuers, "pursuers")
     speeds = _speeds(pursuer_speeds, len(ps))
-    return _safe_set(arena, e, ps, _speed(evader_speed, "evader speed"), speeds, _radius(capture_radius))
+    return _safe_set(arena, e, ps, positive(evader_speed, "evader speed"), speeds, non_negative(capture_radius, "capture radius"))
 
 
 def _safe_set(arena: FmmArena, e, ps, ve: float, speeds, radius: float, remember: bool = True) -> SafeSet:
@@ -424,9 +424,9 @@ class _Game:
 
     def __init__(self, arena: FmmArena, evader_speed, pursuer_speeds, capture_radius) -> None:
         self.arena = arena
-        self.evader_speed = _speed(evader_speed, "evader speed")
+        self.evader_speed = positive(evader_speed, "evader speed")
         self.pursuer_speeds = _speeds(pursuer_speeds, None)
-        self.capture_radius = _radius(capture_radius)
+        self.capture_radius = non_negative(capture_radius, "capture radius")
 
     def _safe(self, e: np.ndarray, ps: np.ndarray) -> SafeSet:
         speeds = _speeds(self.pursuer_speeds, len(ps))
@@ -633,13 +633,6 @@ def _finite_gradient(arena: FmmArena, e, ps, speeds, k: int, ve: float, radius: 
 # ---------------------------------------------------------------------- helpers
 
 
-def _speed(value, name: str) -> float:
-    v = float(value)
-    if not (v > 0 and math.isfinite(v)):
-        raise InputError(f"{name} must be a positive finite number, got {value!r}")
-    return v
-
-
 def _speeds(value, n: int | None) -> np.ndarray:
     s = np.asarray(value, dtype=np.float64)
     if s.ndim > 1 or not (np.isfinite(s) & (s > 0)).all():
@@ -649,13 +642,6 @@ def _speeds(value, n: int | None) -> np.ndarray:
     if s.ndim == 1 and s.size != n:
         raise InputError(f"got {s.size} pursuer speeds for {n} pursuers")
     return np.broadcast_to(s, (n,)).astype(np.float64)
-
-
-def _radius(value) -> float:
-    r = float(value)
-    if not (r >= 0 and math.isfinite(r)):
-        raise InputError(f"capture radius must be a finite number >= 0, got {value!r}")
-    return r
 
 
 # ---------------------------------------------------------------------- kernels

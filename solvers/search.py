@@ -49,7 +49,7 @@ import numba
 import numpy as np
 
 from solvers import fmm
-from solvers.errors import InputError
+from solvers.errors import InputError, non_negative, positive
 from solvers.grid import Grid
 
 __all__ = [
@@ -90,7 +90,7 @@ def footprint(grid: Grid, uav_xy, r_q: float) -> np.ndarray:
     """``V_Q``: the nodes within ``r_q`` of the UAV, which looks straight down
     over buildings. The UAV may be off the grid (its footprint then covers
     what overlaps)."""
-    return _distance_from(grid, _xy(uav_xy, "UAV")) <= _radius(r_q, "footprint radius")
+    return _distance_from(grid, _xy(uav_xy, "UAV")) <= non_negative(r_q, "footprint radius")
 
 
 # --------------------------------------------------------------------------- P_D
@@ -123,7 +123,7 @@ class PossibleDefender:
         """``P_D^0`` = the disk of ``radius`` metres around the defender's last
         known or prior position, with its edge placed between nodes."""
         pd = cls(terrain, grid, np.zeros(grid.shape, dtype=bool))
-        pd._lead = _disk_lead(grid, _point(grid, center, "defender"), _radius(radius, "P_D radius"))
+        pd._lead = _disk_lead(grid, _point(grid, center, "defender"), non_negative(radius, "P_D radius"))
         pd._keep(seen)
         return pd
 
@@ -142,10 +142,8 @@ class PossibleDefender:
         m/s (times the terrain factor), then drop ``seen`` (``V_J`` at the end
         of the step); see the module notes for why growth crosses ground
         seen at both ends of the step."""
-        dt = float(dt)
-        if not (dt >= 0 and math.isfinite(dt)):
-            raise InputError(f"time step must be a finite number >= 0, got {dt}")
-        v_d = _speed(v_d, "defender speed")
+        dt = non_negative(dt, "time step")
+        v_d = positive(v_d, "defender speed")
         seen = _mask(seen, self.grid, "seen")
         # Times are shifted by one cap so every seed is >= 0: a node the front
         # passed ``lead`` metres ago starts at (cap - lead) / v_d.
@@ -161,7 +159,7 @@ class PossibleDefender:
     def found(self, point, radius: float = 0.0) -> None:
         """The defender was seen at ``point`` (within ``radius`` metres): ``P_D``
         collapses onto it, seen though it is, and grows from there."""
-        self._lead = _disk_lead(self.grid, _point(self.grid, point, "defender"), _radius(radius, "found radius"))
+        self._lead = _disk_lead(self.grid, _point(self.grid, point, "defender"), non_negative(radius, "found radius"))
         self._keep(None)
 
     def _keep(self, seen) -> None:
@@ -260,9 +258,9 @@ def search_target(
     defender_wins = _mask(defender_wins, grid, "defender_wins")
     attacker = _point(grid, attacker, "attacker")
     uav = _xy(uav, "UAV")
-    defender_speed = _speed(defender_speed, "defender speed")
-    uav_speed = _speed(uav_speed, "UAV speed")
-    uav_radius = _radius(uav_radius, "UAV footprint radius")
+    defender_speed = positive(defender_speed, "defender speed")
+    uav_speed = positive(uav_speed, "UAV speed")
+    uav_radius = non_negative(uav_radius, "UAV footprint radius")
 
     hx, hy = grid.spacing
     free = terrain > 0
@@ -329,7 +327,7 @@ def lawnmower(bounds, r_q: float, start=None) -> np.ndarray:
     xmin, ymin, xmax, ymax = (float(v) for v in bounds)
     if not (all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)) and xmin < xmax and ymin < ymax):
         raise InputError(f"bounds must be finite (xmin, ymin, xmax, ymax) with min < max, got {bounds!r}")
-    r_q = _radius(r_q, "footprint radius")
+    r_q = non_negative(r_q, "footprint radius")
     if r_q == 0:
         raise InputError("a lawnmower needs a footprint radius > 0")
     along_x = (xmax - xmin) >= (ymax - ymin)
@@ -394,20 +392,6 @@ def _point(grid: Grid, point, who: str) -> np.ndarray:
         (xmin, ymin), (xmax, ymax) = grid.lo, grid.hi
         raise InputError(f"{who} at ({p[0]:g}, {p[1]:g}) is off the grid [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}]")
     return p
-
-
-def _radius(radius, name: str) -> float:
-    radius = float(radius)
-    if not (radius >= 0 and math.isfinite(radius)):
-        raise InputError(f"{name} must be a finite number >= 0, got {radius}")
-    return radius
-
-
-def _speed(speed, name: str) -> float:
-    speed = float(speed)
-    if not (speed > 0 and math.isfinite(speed)):
-        raise InputError(f"{name} must be a positive number, got {speed}")
-    return speed
 
 
 def _distance_from(grid: Grid, p: np.ndarray) -> np.ndarray:

@@ -235,7 +235,7 @@ def test_a_found_defender_may_step_out_of_view():
 def test_possible_defender_refuses_bad_steps():
     grid, free = field()
     pd = PossibleDefender(free, grid, free)
-    with pytest.raises(InputError, match="defender speed must be a positive number"):
+    with pytest.raises(InputError, match="defender speed must be a positive finite number"):
         pd.advance(1.0, 0.0, free)
     with pytest.raises(InputError, match=r"seen has shape \(3, 3\) but the grid has shape \(101, 81\)"):
         pd.advance(1.0, 1.0, np.zeros((3, 3), dtype=bool))
