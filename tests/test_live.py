@@ -2,7 +2,8 @@
 A game finishes and leaves no process behind; a walker killed mid-game is
 seen gone within two seconds and ends the game with that reason; garbage
 published on every key of the game is dropped and counted while the game
-goes on; Ctrl-C stops everything."""
+goes on; Ctrl-C stops everything; a person at a terminal steers a keyboard
+walker."""
 
 import json
 import os
@@ -149,3 +150,59 @@ def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_s
     finally:
         if launcher.poll() is None:
             launcher.kill()
+
+
+def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):
+    """The launcher waits for the keyboard agent and prints the command; run
+    in a real pseudo-terminal, its keys steer the walker (d: east, w:
+    north, space: stop), as a person's would."""
+    import pty
+
+    launcher, out, path = start_run(
+        tmp_path, env, time_limit=14.0, netem="ideal", attacker=(10.0, 10.0), defender=(40.0, 30.0),
+        attacker_behaviour="keyboard", defender_behaviour="follow-guidance",
+    )  # fmt: skip
+    person = None
+    try:
+        command = None
+        for line in launcher.stdout:
+            if "bearcat peer walker" in line:
+                command = line.split()
+                break
+        assert command is not None, "the launcher did not print the keyboard peer's command"
+        master, slave = pty.openpty()
+        person = subprocess.Popen(command, stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True)
+        os.close(slave)
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        presses = []
+        for key, hold in ((b"d", 2.5), (b" ", 2.0), (b"w", 2.5), (b" ", 1.0)):
+            presses.append((time.time(), key))
+            os.write(master, key)
+            time.sleep(hold)
+        launcher.communicate(timeout=60)
+        person.wait(timeout=30)
+        os.close(master)
+    finally:
+        for p in (launcher, person):
+            if p is not None and p.poll() is None:
+                p.kill()
+    track = [(e["t"], e["message"]) for e in read_events(out / "events.jsonl")
+             if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "attacker"]
+
+    def where(t):
+        from maps import load_map
+
+        m = min(track, key=lambda tm: abs(tm[0] - t))[1]
+        return load_map("field-50").to_local(m["lat"], m["lon"])
+
+    (t_east, _), (t_stop, _), (t_north, _), (t_end, _) = presses
+    x0, y0 = where(t_east)
+    x1, y1 = where(t_stop)
+    xs, ys = where(t_stop + 1.0)  # the body stops a reaction time after the key
+    x2, y2 = where(t_north - 0.1)
+    x3, y3 = where(t_end)
+    # East at about 3 m/s for 2.5 s less the reaction time, within the
+    # heading error a person has (10 degrees, wandering); stopped; north.
+    assert x1 - x0 > 4.0 and abs(y1 - y0) < 0.4 * (x1 - x0)
+    assert abs(x2 - xs) < 0.3 and abs(y2 - ys) < 0.3
+    assert y3 - y2 > 4.0 and abs(x3 - x2) < 0.4 * (y3 - y2)
