@@ -21,7 +21,7 @@ from agents.ground_station.guidance import (
 )  # fmt: skip
 from agents.ground_station.referee import Contest, Referee
 from agents.ground_station.sight import Sight
-from agents.ground_station.uav_tasking import UavTasker
+from agents.ground_station.uav_tasking import Uav, UavTasker
 from agents.human import behaviours
 from agents.human.agent import HumanAgent
 from agents.human.phone import Phone
@@ -82,7 +82,7 @@ def cast(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
         )
     game = GAMES[scenario.game](scenario)
-    if scenario.uavs and not hasattr(game, "tasking"):
+    if scenario.uavs and not hasattr(game, "tasker"):
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
     flown = ([u.id for u in scenario.uavs] if people is None else []) if uavs is None else list(uavs)
@@ -97,7 +97,7 @@ def cast(
         return Cast(crowd, uavs=fleet)
     if judge not in ("truth", "fixes"):
         raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
-    tasking = game.tasking() if scenario.uavs else []
+    tasking = [game.tasker()] if scenario.uavs else []
     return Cast(crowd, game.referee(on_truth=judge == "truth"), game.guidance(ctf_progress), tasking, fleet)
 
 
@@ -146,7 +146,7 @@ class _CtfGame:
         self.goals = {"capture": self.flag, "return": self.home}
         self._navigator = None
         self._solved = None
-        self._taskers = None
+        self._tasker = None
         teams = {a.id: a.team for a in scenario.agents} | {u.id: u.team for u in scenario.uavs}
         self.sight = Sight(
             game_map, teams, line_of_sight=r["visibility"] == "line-of-sight", uavs=[u.id for u in scenario.uavs]
@@ -174,33 +174,29 @@ class _CtfGame:
             s.map, self.solved(progress), attacker=self.attacker.id, defender=self.defender.id, phase=self.phase
         )
         if s.uavs:
-            advisor = SearchAdvisor(advisor, self.tasking(), self.sight.side("attacker"))
+            advisor = SearchAdvisor(advisor, self.tasker(), self.sight.side("attacker"))
         limited = self.sight.line_of_sight
         return GuidanceService(
             s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate,
             sight=self.sight if limited or s.uavs else None,
         )  # fmt: skip
 
-    def tasking(self) -> list[UavTasker]:
-        """One tasker per UAV of the attacking side (thesis 6.2 searches for
-        the defender), made once: the guidance shows what they track."""
-        if self._taskers is None:
-            self._taskers = self._make_taskers()
-        return self._taskers
-
-    def _make_taskers(self) -> list[UavTasker]:
-        s = self.scenario
-        if s.uav_of("defender"):
-            raise ScenarioError(f"{s.source}: only the attacker's side flies UAVs (thesis 6.2); uav {s.uav_of('defender')[0].id} is the defender's")
-        return [
-            UavTasker(
-                s.name, s.map, uav=u.id, attacker=self.attacker.id, defender=self.defender.id,
-                defender_start=self.defender.start, defender_speed=self.defender.speed, uav_speed=u.speed,
-                camera_radius=u.camera_radius, altitude=u.altitude, strategy=u.search,
-                ctf=self.solved(), sight=self.sight, name=f"tasking-{u.id}",
-            )
-            for u in s.uavs
-        ]  # fmt: skip
+    def tasker(self) -> UavTasker:
+        """The tasking of the attacking side's UAVs (thesis 6.2 searches for
+        the defender), made once: the guidance shows what it tracks."""
+        if self._tasker is None:
+            s = self.scenario
+            if s.uav_of("defender"):
+                raise ScenarioError(f"{s.source}: only the attacker's side flies UAVs (thesis 6.2); uav {s.uav_of('defender')[0].id} is the defender's")
+            strategies = sorted({u.search for u in s.uavs})
+            if len(strategies) > 1:
+                raise ScenarioError(f"{s.source}: the UAVs of a side search together, by one strategy; these mix {' and '.join(strategies)}")
+            self._tasker = UavTasker(
+                s.name, s.map, uavs=[Uav(u.id, u.speed, u.camera_radius, u.altitude) for u in s.uavs],
+                attacker=self.attacker.id, defender=self.defender.id, defender_start=self.defender.start,
+                defender_speed=self.defender.speed, strategy=strategies[0], ctf=self.solved(), sight=self.sight,
+            )  # fmt: skip
+        return self._tasker
 
     def uav(self, spec, autopilot, truth: bool = True) -> UavAgent:
         opponents = [a.id for a in self.scenario.agents if a.team != spec.team]

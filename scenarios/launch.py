@@ -123,7 +123,8 @@ def launch(
     expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
     expected |= {keys.alive(game, "walker", a.id) for a in scenario.agents}
     expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
-    expected |= {keys.alive(game, "ground-station", f"tasking-{u.id}") for u in scenario.uavs}
+    if scenario.uavs:
+        expected.add(keys.alive(game, "ground-station", "uav-tasking"))
     children: dict[str, subprocess.Popen] = {}
     started_at = None
     reason = None

@@ -200,6 +200,6 @@ def _notes(players) -> dict:
     for tasker in players.tasking:
         picture = tasker.picture
         if picture.found_at is not None:
-            notes[f"{tasker.uav}.found_at"] = picture.found_at
-            notes[f"{tasker.uav}.found_by"] = picture.sightings[0][1]
+            notes["search.found_at"] = picture.found_at
+            notes["search.found_by"] = picture.sightings[0][1]
     return notes

@@ -64,7 +64,7 @@ def test_the_possible_set_always_holds_the_defender_while_it_is_unseen(scenario,
 def test_the_attacker_is_told_of_the_defender_only_after_its_side_saw_it(scenario, tmp_path):
     for seed in range(6):  # the first game in which the UAV or the attacker finds the defender
         events = tmp_path / f"events-{seed}.jsonl"
-        found = simulate(scenario, seed=seed, events=events).notes.get("q1.found_at")
+        found = simulate(scenario, seed=seed, events=events).notes.get("search.found_at")
         if found is not None:
             break
     assert found is not None, "the defender was never found in six games"
@@ -89,7 +89,7 @@ def test_the_uav_climbs_searches_once_a_second_and_its_camera_finds_the_defender
     tasks = [e["t"] for e in log if e["event"] == "sent" and e["message"].get("type") == "uav-task"]
     assert len(tasks) >= 0.8 * (tasks[-1] - tasks[0]) and np.all(np.diff(tasks) > 0.5)
     detections = [e["message"] for e in log if e["event"] == "sent" and e["message"].get("type") == "detection"]
-    if outcome.notes.get("q1.found_by") == "q1":
+    if outcome.notes.get("search.found_by") == "q1":
         assert detections and detections[0]["agent"] == "defender"
     for d in detections:  # the camera reported the truth, within r_q of the UAV
         t = next(e["t"] for e in log if e["event"] == "sent" and e["message"] is d)
@@ -121,7 +121,7 @@ def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario
 
     game = _CtfGame(scenario)
     advisor = game.guidance().advisor
-    (tasker,) = game.tasking()
+    tasker = game.tasker()
     solved = game.solved()
     attacker = np.array([125.0, 150.0])  # north of the hall, 35 m short of home
     fixes = _Fixes(scenario.map)
@@ -151,3 +151,43 @@ def test_a_capture_radius_the_grid_cannot_resolve_is_refused():
     with pytest.raises(ScenarioError, match=r"capture_radius 5 m is less than a cell of the 35-point grid on map "
                                             r"campus-250x200 \(7.35 m\).*at least 51"):
         _CtfGame(coarse)
+
+
+@pytest.mark.parametrize("search", ["reachability", "nearest", "lawnmower"])
+def test_two_uavs_search_together_and_never_the_same_place(search):
+    second = """
+[[uav]]
+id = "q2"
+team = "attacker"
+start = [135.0, 12.0]
+altitude = 25.0
+camera_radius = 15.0
+speed = 8.0
+search = "reachability"
+"""
+    text = _text() + second
+    text = text.replace('search = "reachability"', f'search = "{search}"')
+    scenario = parse_scenario(text, source="two.toml")
+    apart, flown = [], {"q1": 0.0, "q2": 0.0}
+
+    def inspect(now, players):
+        (tasker,) = players.tasking
+        for name, uav in players.uavs.items():
+            if uav.state is not None:
+                flown[name] = max(flown[name], uav.state.alt)
+        targets = tasker.picture.targets
+        tracking = tasker.picture.sightings and now - tasker.picture.sightings[-1][0] <= TRACK_FOR + 1.0
+        if targets.get("q1") and targets.get("q2") and not tracking:
+            apart.append(math.dist(targets["q1"], targets["q2"]))
+
+    simulate(scenario, seed=0, inspect=inspect)
+    assert flown["q1"] > 19.0 and flown["q2"] > 24.0
+    assert len(apart) > 10 and min(apart) >= 15.0  # each leaves the other's ground, 2 r_q wide, alone
+
+
+def test_uavs_of_one_side_search_by_one_strategy():
+    from scenarios.cast import _CtfGame
+
+    mixed = _text() + '[[uav]]\nid = "q2"\nteam = "attacker"\nstart = [135.0, 12.0]\nsearch = "nearest"\n'
+    with pytest.raises(ScenarioError, match="the UAVs of a side search together, by one strategy; these mix nearest and reachability"):
+        _CtfGame(parse_scenario(mixed, source="mixed.toml")).tasker()

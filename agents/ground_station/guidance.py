@@ -365,9 +365,9 @@ class SearchAdvisor:
     not (``worst_case``). P_D grows with the time since the defender was
     last seen, so a stale sighting counts for what it is worth."""
 
-    def __init__(self, ctf: CtfAdvisor, taskers, side) -> None:
+    def __init__(self, ctf: CtfAdvisor, tasker, side) -> None:
         self.ctf = ctf
-        self.taskers = list(taskers)
+        self.tasker = tasker
         self.side = frozenset(side)
         self._drawn: tuple[int, list] = (-1, [])
         self._worst: tuple[tuple, dict | None] = ((), None)
@@ -377,17 +377,16 @@ class SearchAdvisor:
 
     def __call__(self, agent: str, fixes: _Fixes, now: float) -> dict:
         fields = {**self.ctf(agent, fixes, now), "game": "search"}
-        if agent in self.side and self.taskers:
+        if agent in self.side:
             fields["possible"] = self._possible()
             if self.ctf.attacker in fixes.latest:
                 fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0]))
         return fields
 
     def _against_the_worst(self, agent: str, a: np.ndarray) -> dict:
-        tasker = self.taskers[0]
-        key = (agent, a[0], a[1], tasker.picture.updates, self.ctf.phase)
+        key = (agent, a[0], a[1], self.tasker.picture.updates, self.ctf.phase)
         if self._worst[0] != key:
-            worst = tasker.worst_case(a)
+            worst = self.tasker.worst_case(a)
             answer = None
             if worst is not None:
                 answer = self.ctf._answer(agent, a, np.asarray(worst))
@@ -397,11 +396,10 @@ class SearchAdvisor:
         return self._worst[1] or {}
 
     def _possible(self) -> list:
-        """P_D's outlines, redrawn only when a tasker updated it (once a second)."""
-        version = sum(t.picture.updates for t in self.taskers)
-        if version != self._drawn[0]:
-            rings = [ring for t in self.taskers for ring in _mask_rings(t.grid, t.picture.possible)]
-            self._drawn = (version, _geodetic_rings(self.ctf.map, rings))
+        """P_D's outlines, redrawn only when the tasker updated it (once a second)."""
+        picture = self.tasker.picture
+        if picture.updates != self._drawn[0]:
+            self._drawn = (picture.updates, _geodetic_rings(self.ctf.map, _mask_rings(self.tasker.grid, picture.possible)))
         return self._drawn[1]
 
 

@@ -1,14 +1,17 @@
-"""UAV tasking: where the attacking side's UAV searches next (thesis 6.2).
+"""UAV tasking: where the attacking side's UAVs search next (thesis 6.2).
 
 Once a second the ground station updates P_D, where the defender may be,
 from what the attacking side saw since (the attacker's line of sight V_A
-from its last fix, the UAV's camera disk V_Q from the UAV's last fix, a
-detection or a sighting collapsing it onto the defender), and sends the
+from its last fix, every UAV's camera disk V_Q from its last fix, a
+detection or a sighting collapsing it onto the defender), and sends each
 UAV its next point: by the reachability hierarchy of eqs. 6.7-6.9, by a
-lawnmower sweep, or to the nearest point where the defender may be. While
-the defender is in sight the UAV tracks it, as in the 6.2.4 trials. The
-task is sent every second even when it has not changed: it is also the
-UAV's sign that the ground station is there (its failsafe waits on it).
+lawnmower sweep, or to the nearest point where the defender may be. With
+several UAVs the points are chosen in turn, each UAV treating the ground
+the ones before it are bound for as about to be seen, so two UAVs do not
+search the same place. While the defender is in sight the UAVs track it,
+as in the 6.2.4 trials. Tasks go out every second even when they have not
+changed: they are also each UAV's sign that the ground station is there
+(its failsafe waits on them).
 
 ``picture`` keeps the latest sets, for the attacker's phone and the
 recorder; everything is computed from fixes and detections, never truth.
@@ -37,13 +40,23 @@ TRACK_FOR = 3.0  # s the UAV keeps tracking the defender's last sighting
 PRIOR_RADIUS = 5.0  # m: P_D at the start, around the defender's known starting point
 
 
+@dataclass(frozen=True)
+class Uav:
+    """One UAV as the tasker flies it: its name, speed, camera radius r_q and altitude."""
+
+    name: str
+    speed: float
+    camera_radius: float
+    altitude: float
+
+
 @dataclass
 class Picture:
     """The search as the ground station last saw it (metres, grid masks)."""
 
     possible: np.ndarray | None = None
-    target: tuple[float, float] | None = None
-    tier: int | None = None
+    targets: dict[str, tuple[float, float]] = field(default_factory=dict)
+    tiers: dict[str, int | None] = field(default_factory=dict)
     strategy: str = ""
     updates: int = 0  # counts the updates, so a viewer redraws only what changed
     found_at: float | None = None  # first time the attacking side saw the defender
@@ -60,14 +73,11 @@ class UavTasker:
         game: str,
         game_map: Map,
         *,
-        uav: str,
+        uavs,
         attacker: str,
         defender: str,
         defender_start,
         defender_speed: float,
-        uav_speed: float,
-        camera_radius: float,
-        altitude: float,
         strategy: str = "reachability",
         ctf: CtfGuidance | None = None,
         sight,
@@ -77,9 +87,11 @@ class UavTasker:
         if strategy == "reachability" and ctf is None:
             raise InputError("reachability-guided search needs the capture-the-flag solution")
         self.game, self.name, self.map = game, name, game_map
-        self.uav, self.attacker, self.defender = uav, attacker, defender
-        self.defender_speed, self.uav_speed = float(defender_speed), float(uav_speed)
-        self.camera_radius, self.altitude = float(camera_radius), float(altitude)
+        self.uavs = tuple(uavs)
+        if not self.uavs:
+            raise InputError("UAV tasking needs at least one UAV")
+        self.attacker, self.defender = attacker, defender
+        self.defender_speed = float(defender_speed)
         self.strategy, self.ctf, self.sight = strategy, ctf, sight
         self.subscriptions = (keys.every(game, "fix"), keys.every(game, "detection"), keys.state(game))
         raster = rasterize(game_map, spacing)
@@ -95,8 +107,7 @@ class UavTasker:
         self._fixes: dict[str, tuple[np.ndarray, float]] = {}
         self._seen: tuple[np.ndarray, float] | None = None  # the defender's last sighting by the attacking side
         self._last_update: float | None = None
-        self._sweep: np.ndarray | None = None
-        self._sweep_index = 0
+        self._sweeps: dict[str, list] = {}  # UAV -> [waypoints, index]
         self._seq = 0
         self._phase = "return"
 
@@ -123,27 +134,39 @@ class UavTasker:
         return []
 
     def tick(self, now: float) -> list[Send]:
-        if self.ended or not self.running or self.attacker not in self._fixes or self.uav not in self._fixes:
+        flying = [u for u in self.uavs if u.name in self._fixes]
+        if self.ended or not self.running or self.attacker not in self._fixes or not flying:
             return []
-        a, uav = self._placeable(self._fixes[self.attacker][0]), self._fixes[self.uav][0]
+        a = self._placeable(self._fixes[self.attacker][0])
         seen_a = search.visibility(self.free, self.grid, a)
-        seen_q = search.footprint(self.grid, uav, self.camera_radius)
+        seen_q = np.zeros(self.grid.shape, dtype=bool)
+        for u in flying:
+            seen_q |= search.footprint(self.grid, self._fixes[u.name][0], u.camera_radius)
         dt = 0.0 if self._last_update is None else now - self._last_update
         self._last_update = now
-        if self._seen is not None and now - self._seen[1] <= TRACK_FOR:
+        tracking = self._seen is not None and now - self._seen[1] <= TRACK_FOR
+        if tracking:
             self.possible.found(self._seen[0], radius=self.defender_speed * max(now - self._seen[1], 0.0))
-            target, tier = tuple(self._seen[0]), None
         else:
             self.possible.advance(dt, self.defender_speed, seen_a | seen_q)
-            target, tier = self._choose(a, uav, seen_a, seen_q)
-        self.picture.possible, self.picture.target, self.picture.tier = self.possible.mask, target, tier
+        self.picture.possible = self.possible.mask
+        claimed = np.zeros(self.grid.shape, dtype=bool)  # where the UAVs chosen before are bound
+        out = []
+        for u in flying:
+            if tracking:
+                target, tier = tuple(self._seen[0]), None
+            else:
+                target, tier = self._choose(u, a, seen_a, seen_q | claimed)
+            self.picture.targets[u.name], self.picture.tiers[u.name] = target, tier
+            if target is None:
+                continue
+            claimed |= search.footprint(self.grid, target, 2 * u.camera_radius)
+            self._seq += 1
+            lat, lon = self.map.to_geodetic(*target)
+            task = UavTask(uav=u.name, seq=self._seq, t=now, kind="search", lat=lat, lon=lon, alt=u.altitude)
+            out.append(Send(keys.uav_task(self.game, u.name), task))
         self.picture.updates += 1
-        if target is None:
-            return []
-        self._seq += 1
-        lat, lon = self.map.to_geodetic(*target)
-        task = UavTask(uav=self.uav, seq=self._seq, t=now, kind="search", lat=lat, lon=lon, alt=self.altitude)
-        return [Send(keys.uav_task(self.game, self.uav), task)]
+        return out
 
     # ------------------------------------------------------------------ sensing
 
@@ -170,24 +193,31 @@ class UavTasker:
 
     # ------------------------------------------------------------------ where next
 
-    def _choose(self, a, uav, seen_a, seen_q):
+    def _choose(self, u: Uav, a, seen_a, seen_q):
+        """UAV ``u``'s next point; ``seen_q`` holds what the cameras see and
+        where the UAVs tasked before it are bound."""
+        at = self._fixes[u.name][0]
+        possible = self.possible.mask & ~seen_q
         if self.strategy == "reachability":
-            wins = self._defender_wins(a)
             found = search.search_target(
-                self.terrain, self.grid, self.possible.mask, seen_a, seen_q, wins, attacker=a, uav=uav,
-                defender_speed=self.defender_speed, uav_speed=self.uav_speed, uav_radius=self.camera_radius,
+                self.terrain, self.grid, possible, seen_a, seen_q, self._defender_wins(a), attacker=a, uav=at,
+                defender_speed=self.defender_speed, uav_speed=u.speed, uav_radius=u.camera_radius,
             )  # fmt: skip
             return found.target, found.tier
         if self.strategy == "nearest":
-            return search.nearest_unobserved(self.grid, self.possible.mask, uav), None
-        return self._next_sweep_point(uav), None
+            return search.nearest_unobserved(self.grid, possible, at), None
+        return self._next_sweep_point(u, at), None
 
-    def _next_sweep_point(self, uav) -> tuple[float, float]:
-        if self._sweep is None:
-            self._sweep = search.lawnmower(self.map.bounds, self.camera_radius, start=uav)
-        if np.hypot(*(self._sweep[self._sweep_index] - uav)) <= max(2.0, 0.2 * self.camera_radius):
-            self._sweep_index = (self._sweep_index + 1) % len(self._sweep)
-        return tuple(float(v) for v in self._sweep[self._sweep_index])
+    def _next_sweep_point(self, u: Uav, at) -> tuple[float, float]:
+        """The lawnmower: UAV k of n starts k/n of the way along the sweep."""
+        if u.name not in self._sweeps:
+            path = search.lawnmower(self.map.bounds, u.camera_radius, start=at)
+            k = [v.name for v in self.uavs].index(u.name)
+            self._sweeps[u.name] = [path, k * len(path) // len(self.uavs)]
+        path, index = self._sweeps[u.name]
+        if np.hypot(*(path[index] - at)) <= max(2.0, 0.2 * u.camera_radius):
+            self._sweeps[u.name][1] = index = (index + 1) % len(path)
+        return tuple(float(v) for v in path[index])
 
     def worst_case(self, attacker) -> tuple[float, float] | None:
         """The place in P_D where the defender would do best against an
