@@ -113,12 +113,26 @@ def summarise_search(results) -> list[dict]:
     for search, games in sorted(groups.items()):
         found = [g["found_at"] for g in games if g.get("found_at") is not None]
         wins = sum(g["winner"] == "attacker" for g in games)
+        low, high = wilson(wins, len(games))
         rows.append({
             "search": search, "games": len(games), "found": len(found), "median_time_to_find": _median(found),
             "mean_time_to_find": round(sum(found) / len(found), 2) if found else None,
             "attacker_wins": wins, "attacker_win_rate": round(wins / len(games), 3),
+            "win_rate_95": [round(low, 3), round(high, 3)],
         })  # fmt: skip
     return rows
+
+
+def wilson(successes: int, trials: int, z: float = 1.96) -> tuple[float, float]:
+    """The Wilson score interval of a rate (95 % by default): games are
+    chaotic enough that a different network draw turns many of them, so a
+    rate from 50 games is only good to about +-14 %."""
+    if trials == 0:
+        return 0.0, 1.0
+    p = successes / trials
+    centre = (p + z * z / (2 * trials)) / (1 + z * z / trials)
+    half = z * ((p * (1 - p) / trials + z * z / (4 * trials * trials)) ** 0.5) / (1 + z * z / trials)
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def _median(values):

@@ -75,3 +75,12 @@ def test_study_summaries_count_goes_false_goes_and_real_windows():
     assert row["false_go_rate"] == pytest.approx(2 / 3, abs=1e-3)
     tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])
     assert [t["seed"] for t in tasks] == [10, 11, 12] * 2 and len({t["key"] for t in tasks}) == 6
+
+
+def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():
+    from scenarios.studies import wilson
+
+    low, high = wilson(32, 50)
+    assert (round(low, 3), round(high, 3)) == (0.501, 0.759)  # p = 0.64, n = 50
+    assert wilson(0, 10)[0] == 0.0 and wilson(10, 10)[1] == 1.0
+    assert wilson(0, 10)[1] == pytest.approx(0.2775, abs=1e-4)

@@ -66,12 +66,13 @@ def run(args) -> int:
 
 
 def _print_search(rows) -> None:
-    print(f"{'search':<14}{'games':>6}{'found':>7}{'median s':>10}{'mean s':>8}{'attacker wins':>15}")
+    print(f"{'search':<14}{'games':>6}{'found':>7}{'median s':>10}{'mean s':>8}{'attacker wins':>15}{'95% interval':>15}")
     for r in rows:
         median = "-" if r["median_time_to_find"] is None else f"{r['median_time_to_find']:.1f}"
         mean = "-" if r["mean_time_to_find"] is None else f"{r['mean_time_to_find']:.1f}"
+        low, high = r["win_rate_95"]
         print(f"{r['search']:<14}{r['games']:>6}{r['found']:>7}{median:>10}{mean:>8}"
-              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%)")  # fmt: skip
+              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){f'{100 * low:.0f}-{100 * high:.0f}%':>13}")  # fmt: skip
 
 
 def _print_goes(rows) -> None:
