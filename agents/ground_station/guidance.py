@@ -183,10 +183,12 @@ class CtfAdvisor:
         key = (a[0], a[1], d[0], d[1], self.phase)
         held = self._last.get(agent)
         if held is None or held[0] != key:
-            held = self._last[agent] = (key, self._answer(agent, a, d))
+            held = self._last[agent] = (key, self.answer_at(agent, a, d))
         return held[1]
 
-    def _answer(self, agent: str, a: np.ndarray, d: np.ndarray) -> dict:
+    def answer_at(self, agent: str, a: np.ndarray, d: np.ndarray) -> dict:
+        """The CTF fields of ``agent``'s guidance with the attacker at ``a`` and
+        the defender at ``d`` (map metres; moved out of buildings first)."""
         try:
             a = self._placeable(a)
             d = self._placeable(d)
@@ -389,7 +391,7 @@ class SearchAdvisor:
             worst = self.tasker.worst_case(a)
             answer = None
             if worst is not None:
-                answer = self.ctf._answer(agent, a, np.asarray(worst))
+                answer = self.ctf.answer_at(agent, a, np.asarray(worst))
                 answer = {k: answer[k] for k in ("heading", "value", "go") if k in answer}
                 answer["worst_case"] = "value" in answer
             self._worst = (key, answer)
