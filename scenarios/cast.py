@@ -8,14 +8,13 @@ and the agent's name, so adding an agent does not change another's draws.
 
 from __future__ import annotations
 
-import math
 import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
 
-from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve
+from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve, unresolved_capture
 from agents.ground_station.guidance import (
     CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor, SearchAdvisor,
 )  # fmt: skip
@@ -129,15 +128,12 @@ class _CtfGame:
             game_map, self.attacker.speed, self.defender.speed,
             capture_radius=r["capture_radius"], capture_time=r["capture_time"], return_time=r["return_time"],
         )  # fmt: skip
-        xmin, ymin, xmax, ymax = game_map.bounds
-        cell = max(xmax - xmin, ymax - ymin) / (r["grid"] - 1)
-        if self.rules.capture_radius < cell - 1e-9:
-            # The 4-D solver sees capture only where the radius spans a cell;
-            # below that the defender's winning set all but vanishes.
+        coarse = unresolved_capture(game_map, r["grid"], self.rules.capture_radius)
+        if coarse is not None:
             raise ScenarioError(
                 f"{scenario.source}: rules.capture_radius {self.rules.capture_radius:g} m is less than a cell of the "
-                f"{r['grid']}-point grid on map {game_map.name} ({cell:.2f} m), too coarse to resolve capture; "
-                f"raise rules.grid to at least {math.ceil(max(xmax - xmin, ymax - ymin) / self.rules.capture_radius) + 1} or the radius"
+                f"{r['grid']}-point grid on map {game_map.name} ({coarse[0]:.2f} m), too coarse to resolve capture; "
+                f"raise rules.grid to at least {coarse[1]} or the radius"
             )
         self.flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
         self.home = shapely.union_all([g.geometry for g in game_map.regions_with_role("return")])

@@ -93,6 +93,8 @@ def test_play_writes_tracks_and_a_figure(cache, tmp_path):
         (("--map", "campus-200", "--attacker", "50,150", "--defender", "100,100"), "defender at (100.0, 100.0) is inside"),
         (("--map", "ctf-10", "--grid", "400", "--attacker", "1,1", "--defender", "2,2"), "GB"),
         (("--map", "ctf-10", "--grid", "5", "--attacker", "1,1", "--defender", "2,2"), "--grid 5"),
+        (("--map", "ctf-10", "--grid", "15", "--attacker", "1,1", "--defender", "2,2"),
+         "--grid 15 is too coarse for a capture radius of 0.5 m: its cells on map ctf-10 are 0.71 m; use --grid 21"),
     ],
 )
 def test_bad_input_is_one_sentence_naming_the_culprit(words, culprit, tmp_path):

@@ -14,6 +14,8 @@ directory is safe to delete; a damaged entry is logged and solved again.
 
 from __future__ import annotations
 
+import math
+
 import hashlib
 import json
 import logging
@@ -66,6 +68,20 @@ def default_rules(
         capture_time=capture_time or horizon,
         return_time=return_time or capture_time or horizon,
     )
+
+
+def unresolved_capture(game_map: Map, grid: int, capture_radius: float) -> tuple[float, int] | None:
+    """(cell, points needed) if a ``grid``-point grid over ``game_map`` is
+    too coarse for ``capture_radius``, else None. The 4-D solver sees
+    capture only where the radius spans a cell; below that the defender's
+    winning set all but vanishes (on campus-250x200, a 5 m radius on 5.7 m
+    cells left the attacker winning with the defender between it and home)."""
+    xmin, ymin, xmax, ymax = game_map.bounds
+    side = max(xmax - xmin, ymax - ymin)
+    cell = side / (grid - 1)
+    if capture_radius >= cell - 1e-9:
+        return None
+    return cell, math.ceil(side / capture_radius) + 1
 
 
 @dataclass(frozen=True)

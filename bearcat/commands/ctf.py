@@ -17,7 +17,7 @@ from pathlib import Path
 
 from bearcat import arguments
 from maps import load_map
-from agents.ground_station.ctf_cache import CtfGame, Solved, cache_root, default_rules, load_or_solve
+from agents.ground_station.ctf_cache import CtfGame, Solved, cache_root, default_rules, load_or_solve, unresolved_capture
 from solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
 from solvers.ctf_guidance import Guidance
 from solvers.ctf_playout import play
@@ -111,6 +111,12 @@ def game_from_args(args) -> CtfGame:
     )  # fmt: skip
     if args.grid < 9:
         raise arguments.UsageError(f"--grid {args.grid} is too coarse; use at least 9 points per axis")
+    coarse = unresolved_capture(game_map, args.grid, rules.capture_radius)
+    if coarse is not None:
+        raise arguments.UsageError(
+            f"--grid {args.grid} is too coarse for a capture radius of {rules.capture_radius:g} m: its cells on "
+            f"map {game_map.name} are {coarse[0]:.2f} m; use --grid {coarse[1]} or more, or a larger --capture-radius"
+        )
     return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol)
 
 
