@@ -14,9 +14,9 @@ import math
 import numpy as np
 import shapely
 
-from maps import Map, rasterize
-from maps.raster import covered
-from solvers import fmm
+from bearcat.maps import Map, rasterize
+from bearcat.maps.raster import covered
+from bearcat.solvers import fmm
 
 LOOK_AHEAD = 2.0  # metres along the path the returned direction aims at
 

@@ -14,7 +14,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
-from bus.messages import Message
+from bearcat.bus.messages import Message
 
 
 @dataclass(frozen=True)

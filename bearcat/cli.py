@@ -13,6 +13,7 @@ import sys
 
 from bearcat import __version__
 from bearcat.arguments import UsageError
+from bearcat.bus.errors import BusError
 from bearcat.commands import ctf as ctf_command
 from bearcat.commands import experiment as experiment_command
 from bearcat.commands import live as live_command
@@ -21,16 +22,23 @@ from bearcat.commands import simulate as simulate_command
 from bearcat.commands import solve as solve_command
 from bearcat.commands import study as study_command
 from bearcat.commands import vehicle as vehicle_command
-from bus.errors import BusError
-from maps.errors import MapError
-from netem.profiles import ProfileError
-from scenarios.schema import ScenarioError
-from solvers.errors import InputError
+from bearcat.maps.errors import MapError
+from bearcat.netem.profiles import ProfileError
+from bearcat.scenarios.schema import ScenarioError
+from bearcat.solvers.errors import InputError
 
 USER_ERRORS = (
-    UsageError, MapError, InputError, ScenarioError, ProfileError, BusError, FileNotFoundError, IsADirectoryError, PermissionError,
+    UsageError,
+    MapError,
+    InputError,
+    ScenarioError,
+    ProfileError,
+    BusError,
+    FileNotFoundError,
+    IsADirectoryError,
+    PermissionError,
     TimeoutError,
-)  # fmt: skip
+)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -41,8 +49,16 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"bearcat {__version__}")
     parser.add_argument("-v", "--verbose", action="count", default=0, help="log more (repeat for debug)")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND", required=True)
-    for module in (maps_command, solve_command, ctf_command, experiment_command, simulate_command, live_command, study_command,
-                   vehicle_command):
+    for module in (
+        maps_command,
+        solve_command,
+        ctf_command,
+        experiment_command,
+        simulate_command,
+        live_command,
+        study_command,
+        vehicle_command,
+    ):
         module.register(subparsers)
     return parser
 

@@ -10,12 +10,12 @@ import matplotlib
 
 matplotlib.use("Agg")
 
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
+import matplotlib.pyplot as plt
+import numpy as np
 
-from maps import Map, Raster  # noqa: E402
-from maps.plot import draw_map  # noqa: E402
-from solvers.openloop import OpenLoopSolution  # noqa: E402
+from bearcat.maps import Map, Raster
+from bearcat.maps.plot import draw_map
+from bearcat.solvers.openloop import OpenLoopSolution
 
 STAGE_COLOURS = ("tab:red", "tab:purple", "tab:orange", "tab:brown", "tab:pink")
 
@@ -39,9 +39,7 @@ def openloop_figure(
     S_k (its boundary, with level lines of phi_k inside), the stage's stretch of the
     path solid and the rest dotted, the defenders and the targets."""
     stages = solution.stages
-    fig, axes = plt.subplots(
-        1, len(stages), figsize=(6.2 * len(stages), 6.8), squeeze=False, layout="constrained"
-    )
+    fig, axes = plt.subplots(1, len(stages), figsize=(6.2 * len(stages), 6.8), squeeze=False, layout="constrained")
     path = solution.path
     cuts = list(path.stage_starts) + [len(path.points) - 1] if path is not None else []
     for k, (ax, stage) in enumerate(zip(axes[0], stages)):
@@ -66,8 +64,10 @@ def openloop_figure(
             ax.plot(x, y, "^", color="tab:red", markersize=10, markeredgecolor="white")
         entry = report["stages"][k]
         value = "unreachable" if entry["value_s"] is None else f"{entry['value_s']:.1f} s"
-        ax.set_title(f"stage {k + 1}: to {entry['target']}, attacker {entry['attacker_speed']:g} m/s\n"
-                     f"value {value}, S_{k + 1} area {entry['safe_area_m2']:.0f} m$^2$")
+        ax.set_title(
+            f"stage {k + 1}: to {entry['target']}, attacker {entry['attacker_speed']:g} m/s\n"
+            f"value {value}, S_{k + 1} area {entry['safe_area_m2']:.0f} m$^2$"
+        )
     verdict = "safe path found" if solution.reached else f"no safe path (stage {report['blocked_stage']})"
     fig.suptitle(f"open-loop reach-avoid on {game_map.name}: {verdict}")
     return fig
@@ -87,13 +87,23 @@ def _region(ax, guidance, values: np.ndarray, side: str, colour: str, label: str
 def _players(ax, attacker, defender, attacker_heading=None, defender_heading=None, scale=1.0) -> None:
     ax.plot(*attacker, "o", color="tab:blue", markersize=10, markeredgecolor="white", label="attacker", zorder=5)
     ax.plot(*defender, "^", color="tab:red", markersize=11, markeredgecolor="white", label="defender", zorder=5)
-    for (px, py), heading, colour in ((attacker, attacker_heading, "tab:blue"), (defender, defender_heading, "tab:red")):
+    for (px, py), heading, colour in (
+        (attacker, attacker_heading, "tab:blue"),
+        (defender, defender_heading, "tab:red"),
+    ):
         if heading is not None:
-            ax.annotate("", xy=(px + scale * heading[0], py + scale * heading[1]), xytext=(px, py),
-                        arrowprops=dict(arrowstyle="-|>", color=colour, linewidth=2), zorder=6)  # fmt: skip
+            ax.annotate(
+                "",
+                xy=(px + scale * heading[0], py + scale * heading[1]),
+                xytext=(px, py),
+                arrowprops=dict(arrowstyle="-|>", color=colour, linewidth=2),
+                zorder=6,
+            )
 
 
-def ctf_query_figure(game_map: Map, guidance, attacker, defender, report, phase, defender_values, attacker_values, set_name):
+def ctf_query_figure(
+    game_map: Map, guidance, attacker, defender, report, phase, defender_values, attacker_values, set_name
+):
     """What each phone shows (thesis Fig. 3.6, 3.9): on the attacker's, the
     defender positions that win against it, R_D(x_a); on the defender's, the
     attacker positions that win against it, R_A(x_d); each with its optimal
@@ -108,12 +118,19 @@ def ctf_query_figure(game_map: Map, guidance, attacker, defender, report, phase,
     ):
         draw_map(ax, game_map, labels=True)
         _region(ax, guidance, values, side, colour, label)
-        _players(ax, attacker, defender,
-                 report.attacker_heading if heading == "attacker" else None,
-                 report.defender_heading if heading == "defender" else None, scale)  # fmt: skip
+        _players(
+            ax,
+            attacker,
+            defender,
+            report.attacker_heading if heading == "attacker" else None,
+            report.defender_heading if heading == "defender" else None,
+            scale,
+        )
         ax.legend(loc="lower right", fontsize=8)
         ax.set_title(f"{heading}'s view: {label}")
-    fig.suptitle(f"capture-the-flag on {game_map.name}, {phase} phase: {report.winner} wins, value {report.value:+.2f} m")
+    fig.suptitle(
+        f"capture-the-flag on {game_map.name}, {phase} phase: {report.winner} wins, value {report.value:+.2f} m"
+    )
     return fig
 
 
@@ -127,8 +144,14 @@ def ctf_play_figure(game_map: Map, guidance, outcome, start):
     name = guidance.value_set(phase).name
     region = {"win": "W_D", "capture": "F_D", "return": "R_D"}[name]
     draw_map(left, game_map, labels=True)
-    _region(left, guidance, guidance.defender_region_values(attacker, phase), "defender", "tab:red",
-            f"{region}(x_a): defender wins")  # fmt: skip
+    _region(
+        left,
+        guidance,
+        guidance.defender_region_values(attacker, phase),
+        "defender",
+        "tab:red",
+        f"{region}(x_a): defender wins",
+    )
     _players(left, attacker, defender)
     left.legend(loc="lower right", fontsize=8)
     left.set_title(f"start: {start.winner} predicted to win (value {start.value:+.2f} m)")
@@ -164,8 +187,14 @@ def pursuit_histograms(table: dict, domains, counts):
         bins = np.linspace(min(values), max(values), 31) if min(values) < max(values) else 10
         for k, (n, row) in enumerate(rows):
             if row and row["differences"]:
-                ax.hist(row["differences"], bins=bins, histtype="step", linewidth=1.8, color=colours[k % len(colours)],
-                        label=f"{n} pursuer{'s' if n > 1 else ''}: {row['area_faster_percent']:.1f}% faster")  # fmt: skip
+                ax.hist(
+                    row["differences"],
+                    bins=bins,
+                    histtype="step",
+                    linewidth=1.8,
+                    color=colours[k % len(colours)],
+                    label=f"{n} pursuer{'s' if n > 1 else ''}: {row['area_faster_percent']:.1f}% faster",
+                )
         ax.axvline(0.0, color="black", linewidth=0.8)
         ax.set_xlabel("capture time, area minus pure pursuit")
         ax.set_ylabel("trials")

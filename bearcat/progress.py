@@ -16,9 +16,12 @@ def solve_bars():
     def update(name, t, horizon, change):
         bar = bars.get(name)
         if bar is None:
-            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"solving the {name} set", file=sys.stderr,
-                                    bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s of game time "
-                                    "[{elapsed}]")  # fmt: skip
+            bar = bars[name] = tqdm(
+                total=round(horizon, 2),
+                desc=f"solving the {name} set",
+                file=sys.stderr,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s of game time [{elapsed}]",
+            )
         bar.update(round(t - bar.n, 2))
         if t >= horizon - 1e-9:
             bar.close()

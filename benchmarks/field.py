@@ -37,10 +37,10 @@ GAME = "bench"
 
 def phone(args) -> None:
     """One phone process: fixes at 10 Hz, latencies of their answers to a JSON file."""
-    from bus import keys
-    from bus.codec import decode, encode
-    from bus.messages import Fix, Guidance
-    from bus.zenoh_session import ZenohSession, config
+    from bearcat.bus import keys
+    from bearcat.bus.codec import decode, encode
+    from bearcat.bus.messages import Fix, Guidance
+    from bearcat.bus.zenoh_session import ZenohSession, config
 
     session = ZenohSession(args.phone, config(connect=[args.connect], listen=[], mode=args.mode))
     sent: dict[float, float] = {}
@@ -74,24 +74,27 @@ def phone(args) -> None:
         with lock:
             sent[t] = t
         lat, lon = 37.8719 + 1e-6 * (seq % 100), -122.2585
-        session.put(keys.fix(GAME, args.phone), encode(Fix(agent=args.phone, seq=seq, t=t, lat=lat, lon=lon)), reliable=False)
+        session.put(
+            keys.fix(GAME, args.phone), encode(Fix(agent=args.phone, seq=seq, t=t, lat=lat, lon=lon)), reliable=False
+        )
         session.put(f"bench/echo/{args.phone}/out", str(time.time()).encode(), reliable=False)
         due += 0.1
         time.sleep(max(due - time.monotonic(), 0))
     time.sleep(1.0)
     session.close()
-    Path(args.out).write_text(json.dumps({"latencies": latencies, "sent": seq, "answered": len(latencies),
-                                          "echo": echo_rtts}))  # fmt: skip
+    Path(args.out).write_text(
+        json.dumps({"latencies": latencies, "sent": seq, "answered": len(latencies), "echo": echo_rtts})
+    )
 
 
 def latency(n: int, duration: float, mode: str = "peer") -> dict:
-    from agents.ground_station.guidance import GuidanceService
-    from bus import keys
-    from bus.codec import Inbox
-    from bus.zenoh_session import ZenohSession, config
-    from maps import load_map
-    from scenarios.launch import free_port
-    from scenarios.live import run_peer
+    from bearcat.agents.ground_station.guidance import GuidanceService
+    from bearcat.bus import keys
+    from bearcat.bus.codec import Inbox
+    from bearcat.bus.zenoh_session import ZenohSession, config
+    from bearcat.maps import load_map
+    from bearcat.scenarios.launch import free_port
+    from bearcat.scenarios.live import run_peer
 
     port = free_port()
     endpoint = f"tcp/127.0.0.1:{port}"
@@ -114,8 +117,24 @@ def latency(n: int, duration: float, mode: str = "peer") -> dict:
     session.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, up: seen.add(k) if up else None)
     with tempfile.TemporaryDirectory() as tmp:
         procs = [
-            subprocess.Popen([sys.executable, __file__, "--phone", pid, "--connect", endpoint, "--duration", str(duration),
-                              "--warmup", "3", "--out", f"{tmp}/{pid}.json", "--mode", mode])  # fmt: skip
+            subprocess.Popen(
+                [
+                    sys.executable,
+                    __file__,
+                    "--phone",
+                    pid,
+                    "--connect",
+                    endpoint,
+                    "--duration",
+                    str(duration),
+                    "--warmup",
+                    "3",
+                    "--out",
+                    f"{tmp}/{pid}.json",
+                    "--mode",
+                    mode,
+                ]
+            )
             for pid in ids
         ]
 
@@ -135,15 +154,20 @@ def latency(n: int, duration: float, mode: str = "peer") -> dict:
     sent = sum(r["sent"] for r in results)
     lost = sent - sum(len(seqs) for seqs in received.values())
     return {
-        "phones": n, "fixes": sent, "lost": lost, "unanswered": sent - sum(r["answered"] for r in results),
-        "p50_ms": float(np.percentile(lat, 50)), "p99_ms": float(np.percentile(lat, 99)),
-        "echo_p50_ms": float(np.percentile(rtt, 50)), "echo_p99_ms": float(np.percentile(rtt, 99)),
-    }  # fmt: skip
+        "phones": n,
+        "fixes": sent,
+        "lost": lost,
+        "unanswered": sent - sum(r["answered"] for r in results),
+        "p50_ms": float(np.percentile(lat, 50)),
+        "p99_ms": float(np.percentile(lat, 99)),
+        "echo_p50_ms": float(np.percentile(rtt, 50)),
+        "echo_p99_ms": float(np.percentile(rtt, 99)),
+    }
 
 
 def simulate_speed(games: int) -> list[dict]:
-    from scenarios.schema import load_scenario
-    from scenarios.simulate import simulate
+    from bearcat.scenarios.schema import load_scenario
+    from bearcat.scenarios.simulate import simulate
 
     rows = []
     for name in ("fake-out-aided-defender", "fake-out", "go-no-go"):
@@ -166,8 +190,12 @@ def main() -> None:
     parser.add_argument("--games", type=int, default=5)
     parser.add_argument("--simulate-only", action="store_true")
     parser.add_argument("--latency-only", action="store_true")
-    parser.add_argument("--mode", choices=("peer", "client"), default="peer",
-                        help="phones as Zenoh peers (a full mesh) or as clients of the ground station as a router")
+    parser.add_argument(
+        "--mode",
+        choices=("peer", "client"),
+        default="peer",
+        help="phones as Zenoh peers (a full mesh) or as clients of the ground station as a router",
+    )
     parser.add_argument("--phone", help=argparse.SUPPRESS)
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--warmup", type=float, default=3.0, help=argparse.SUPPRESS)
@@ -178,15 +206,22 @@ def main() -> None:
     if not args.latency_only:
         print("simulate, in-process virtual time (target: >= 50x real time)")
         for r in simulate_speed(args.games):
-            print(f"  {r['scenario']:<26} {r['games']} games, {r['game_s']:7.1f} s of play in {r['wall_s']:6.2f} s: "
-                  f"{r['speedup']:6.1f}x real time")  # fmt: skip
+            print(
+                f"  {r['scenario']:<26} {r['games']} games, {r['game_s']:7.1f} s of play in {r['wall_s']:6.2f} s: "
+                f"{r['speedup']:6.1f}x real time"
+            )
     if not args.simulate_only:
-        print("fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)")
+        print(
+            "fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)"
+        )
         for n in args.phones:
             r = latency(n, args.duration, args.mode)
-            print(f"  {n:3d} phones ({args.mode}s): {r['fixes']} fixes, {r['lost']} lost, {r['unanswered']} unanswered; latency p50 {r['p50_ms']:.2f} ms, "
-                  f"p99 {r['p99_ms']:.2f} ms; bare Zenoh echo p50 {r['echo_p50_ms']:.2f} ms, p99 {r['echo_p99_ms']:.2f} ms "
-                  f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)")  # fmt: skip
+            print(
+                f"  {n:3d} phones ({args.mode}s): {r['fixes']} fixes, {r['lost']} lost, {r['unanswered']} unanswered; "
+                f"latency p50 {r['p50_ms']:.2f} ms, p99 {r['p99_ms']:.2f} ms; "
+                f"bare Zenoh echo p50 {r['echo_p50_ms']:.2f} ms, p99 {r['echo_p99_ms']:.2f} ms "
+                f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)"
+            )
 
 
 if __name__ == "__main__":

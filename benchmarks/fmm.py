@@ -19,9 +19,9 @@ import time
 import numpy as np
 import skfmm
 
-from solvers.fmm import point_source, travel_time
-from solvers.grid import Grid
-from solvers.openloop import Defender, solve_openloop
+from bearcat.solvers.fmm import point_source, travel_time
+from bearcat.solvers.grid import Grid
+from bearcat.solvers.openloop import Defender, solve_openloop
 
 REPEATS = {400: 9, 1000: 5, 2000: 3}
 
@@ -53,7 +53,7 @@ def part_a() -> None:
     for n in REPEATS:
         g, speed, src = obstacle_field(n)
         initial = point_source(g, src, speed)
-        ours_s = median_seconds(lambda: travel_time(speed, 1.0, initial), REPEATS[n])
+        ours_s = median_seconds(lambda speed=speed, initial=initial: travel_time(speed, 1.0, initial), REPEATS[n])
         ours = travel_time(speed, 1.0, initial)
         # scikit-fmm starts from the zero level set of phi (a small circle
         # around the source) and takes obstacles as a mask.
@@ -61,18 +61,16 @@ def part_a() -> None:
         r0 = 1.5
         phi = np.ma.MaskedArray(np.hypot(x - src[0], y - src[1]) - r0, speed == 0)
         v = np.ma.MaskedArray(np.where(speed > 0, speed, 1.0), speed == 0)
-        theirs_s = median_seconds(lambda: skfmm.travel_time(phi, v, 1.0, order=1), REPEATS[n])
+        theirs_s = median_seconds(lambda phi=phi, v=v: skfmm.travel_time(phi, v, 1.0, order=1), REPEATS[n])
         theirs = np.ma.filled(skfmm.travel_time(phi, v, 1.0, order=1), np.inf)
         theirs = np.where(np.hypot(x - src[0], y - src[1]) < r0, np.inf, theirs + r0)
         both = np.isfinite(ours) & np.isfinite(theirs)
         diff = np.abs(ours[both] - theirs[both]).max()
-        print(
-            f"{n:>5}^2    {ours_s * 1e3:>11.1f} {theirs_s * 1e3:>9.1f} {theirs_s / ours_s:>8.2f}x {diff:>13.3f}"
-        )
+        print(f"{n:>5}^2    {ours_s * 1e3:>11.1f} {theirs_s * 1e3:>9.1f} {theirs_s / ours_s:>8.2f}x {diff:>13.3f}")
 
 
 def campus_game():
-    from maps import load_map, rasterize
+    from bearcat.maps import load_map, rasterize
 
     raster = rasterize(load_map("campus-400"), 1.0)
     m = raster.speed
@@ -99,8 +97,8 @@ FIRST_CALL = textwrap.dedent(
     import time
     t = time.perf_counter()
     import numpy as np
-    from solvers.grid import Grid
-    from solvers.openloop import Defender, solve_openloop
+    from bearcat.solvers.grid import Grid
+    from bearcat.solvers.openloop import Defender, solve_openloop
     g = Grid.covering((0, 0), (30, 30), 0.5)
     v = np.ones(g.shape)
     x, y = g.mesh()

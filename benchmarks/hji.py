@@ -43,7 +43,7 @@ STRIP = 4.0
 
 def problem(n: int):
     """Target ``l`` and avoid ``g`` on the ``n^4`` grid, float32."""
-    from solvers.grid import Grid
+    from bearcat.solvers.grid import Grid
 
     grid = Grid.spanning((-5.0,) * 4, (5.0,) * 4, (n,) * 4)
     xa, ya, xd, yd = np.meshgrid(*grid.axes(), indexing="ij", sparse=True)
@@ -53,8 +53,8 @@ def problem(n: int):
 
 
 def run_ours(n: int, scheme: str, horizon: float, tol: float) -> dict:
-    from solvers.hamiltonians import SimpleMotion
-    from solvers.hji import solve_reach_avoid
+    from bearcat.solvers.hamiltonians import SimpleMotion
+    from bearcat.solvers.hji import solve_reach_avoid
 
     grid, target, avoid = problem(n)
     game = SimpleMotion.pursuit(1.0, 1.0)
@@ -94,9 +94,7 @@ def run_hj(n: int, scheme: str, horizon: float) -> dict:
 
     class Pursuit(hj.ControlAndDisturbanceAffineDynamics):
         def __init__(self):
-            super().__init__(
-                "min", "max", hj.sets.Ball(jnp.zeros(2), 1.0), hj.sets.Ball(jnp.zeros(2), 1.0)
-            )
+            super().__init__("min", "max", hj.sets.Ball(jnp.zeros(2), 1.0), hj.sets.Ball(jnp.zeros(2), 1.0))
 
         def open_loop_dynamics(self, state, time):
             return jnp.zeros(4)
@@ -112,11 +110,11 @@ def run_hj(n: int, scheme: str, horizon: float) -> dict:
     grid = hj.Grid.from_lattice_parameters_and_boundary_conditions(
         hj.sets.Box(jnp.full(4, -5.0), jnp.full(4, 5.0)), (n,) * 4, boundary_conditions=(up, up, down, down)
     )
-    l, g = jnp.asarray(target), jnp.asarray(avoid)
+    target_j, avoid_j = jnp.asarray(target), jnp.asarray(avoid)
     settings = hj.SolverSettings.with_accuracy(
-        HJ_ACCURACY[scheme], value_postprocessor=lambda t, v: jnp.maximum(jnp.minimum(v, l), -g)
+        HJ_ACCURACY[scheme], value_postprocessor=lambda t, v: jnp.maximum(jnp.minimum(v, target_j), -avoid_j)
     )
-    initial = jnp.maximum(l, -g)
+    initial = jnp.maximum(target_j, -avoid_j)
     dynamics = Pursuit()
     hj.solve(settings, dynamics, grid, jnp.array([0.0, -1e-3]), initial, progress_bar=False).block_until_ready()
     start = time.perf_counter()
@@ -124,8 +122,13 @@ def run_hj(n: int, scheme: str, horizon: float) -> dict:
     final = np.asarray(values[-1].block_until_ready())
     seconds = time.perf_counter() - start
     dt = settings.CFL_number / (4 / float(grid.spacings[0]))
-    return {"seconds": seconds, "steps": int(np.ceil(horizon / dt - 1e-9)), "time": horizon,
-            "converged_at": None, "set": final <= 0}  # fmt: skip
+    return {
+        "seconds": seconds,
+        "steps": int(np.ceil(horizon / dt - 1e-9)),
+        "time": horizon,
+        "converged_at": None,
+        "set": final <= 0,
+    }
 
 
 GAME_MAP, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON = "field-50", 3.0, 2.5, 60.0
@@ -134,10 +137,10 @@ GAME_MAP, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON = "field-50", 3.0, 2.5, 
 def run_game(n: int) -> dict:
     """The two-stage game (R_A, then W_A) on field-50 to convergence, then
     the guidance queries of one ground-station tick on it."""
-    from agents.ground_station.ctf_arena import ctf_arena
-    from maps import load_map
-    from solvers.ctf import Rules, solve_ctf
-    from solvers.ctf_guidance import Guidance
+    from bearcat.agents.ground_station.ctf_arena import ctf_arena
+    from bearcat.maps import load_map
+    from bearcat.solvers.ctf import Rules, solve_ctf
+    from bearcat.solvers.ctf_guidance import Guidance
 
     rules = Rules(GAME_SPEED, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON, GAME_HORIZON)
     game_map = load_map(GAME_MAP)
@@ -164,8 +167,10 @@ def run_game(n: int) -> dict:
                 timings[key].append(dt * 1e3)
     return {
         "seconds": seconds,
-        "sets": {name: {"converged_at": s.converged_at, "steps": s.steps, "wins": float(s.attacker_wins.mean())}
-                 for name, s in solution.sets.items()},
+        "sets": {
+            name: {"converged_at": s.converged_at, "steps": s.steps, "wins": float(s.attacker_wins.mean())}
+            for name, s in solution.sets.items()
+        },
         "query_ms": {key: float(np.median(v)) for key, v in timings.items()},
     }
 
@@ -186,8 +191,22 @@ def child(args) -> None:
 
 
 def measure(solver: str, n: int, scheme: str, horizon: float, tol: float, mask: str) -> dict:
-    cmd = [sys.executable, __file__, "--child", solver, "--n", str(n), "--scheme", scheme,
-           "--horizon", str(horizon), "--tol", str(tol), "--mask", mask]  # fmt: skip
+    cmd = [
+        sys.executable,
+        __file__,
+        "--child",
+        solver,
+        "--n",
+        str(n),
+        "--scheme",
+        scheme,
+        "--horizon",
+        str(horizon),
+        "--tol",
+        str(tol),
+        "--mask",
+        mask,
+    ]
     env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")])))
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     if done.returncode != 0:
@@ -201,8 +220,10 @@ ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 def row(label: str, n: int, r: dict, ratio: str = "", disagree: str = "") -> str:
     ns = r["seconds"] / r["steps"] / n**4 * 1e9
     conv = f"{r['converged_at']:.1f}" if r.get("converged_at") else "-"
-    return (f"{label:<24} {n:>3}^4 {r['time']:>6.1f} {conv:>6} {r['steps']:>5} {r['seconds']:>8.1f} {ns:>8.1f} "
-            f"{r['peak_mb']:>8.0f} {ratio:>7} {disagree:>9}")  # fmt: skip
+    return (
+        f"{label:<24} {n:>3}^4 {r['time']:>6.1f} {conv:>6} {r['steps']:>5} {r['seconds']:>8.1f} {ns:>8.1f} "
+        f"{r['peak_mb']:>8.0f} {ratio:>7} {disagree:>9}"
+    )
 
 
 def main() -> None:
@@ -229,10 +250,14 @@ def main() -> None:
 def compare(quick: bool) -> None:
     """Ours against hj_reachability on one problem, then ours to convergence and at 65^4."""
     n, horizon = (21, 2.0) if quick else (45, 6.0)
-    print(f"flag-return set on [-5,5]^2 per agent, return strip x >= {STRIP}, r_c = {CAPTURE_RADIUS}, "
-          f"equal speeds, CFL 0.75, float32, {os.cpu_count()} cores")  # fmt: skip
-    print(f"{'solver':<24} {'grid':>5} {'horizon':>6} {'conv':>6} {'steps':>5} {'seconds':>8} "
-          f"{'ns/n/st':>8} {'peak MB':>8} {'speedup':>7} {'disagree':>9}")  # fmt: skip
+    print(
+        f"flag-return set on [-5,5]^2 per agent, return strip x >= {STRIP}, r_c = {CAPTURE_RADIUS}, "
+        f"equal speeds, CFL 0.75, float32, {os.cpu_count()} cores"
+    )
+    print(
+        f"{'solver':<24} {'grid':>5} {'horizon':>6} {'conv':>6} {'steps':>5} {'seconds':>8} "
+        f"{'ns/n/st':>8} {'peak MB':>8} {'speedup':>7} {'disagree':>9}"
+    )
     with tempfile.TemporaryDirectory() as tmp:
         for scheme in ("first", "weno5"):
             ours_mask, hj_mask = os.path.join(tmp, "ours.npy"), os.path.join(tmp, "hj.npy")
@@ -240,8 +265,10 @@ def compare(quick: bool) -> None:
             theirs = measure("hj", n, scheme, horizon, 0.0, hj_mask)
             differ = float(np.mean(np.load(ours_mask) != np.load(hj_mask)))
             print(row(f"hj_reachability {scheme}", n, theirs), flush=True)
-            print(row(f"bearcat {scheme}", n, ours, f"{theirs['seconds'] / ours['seconds']:.1f}x", f"{differ:.2e}"),
-                  flush=True)  # fmt: skip
+            print(
+                row(f"bearcat {scheme}", n, ours, f"{theirs['seconds'] / ours['seconds']:.1f}x", f"{differ:.2e}"),
+                flush=True,
+            )
         for scheme in ("first", "weno5"):
             conv = measure("ours", n, scheme, 30.0, 0.01, os.path.join(tmp, "conv.npy"))
             print(row(f"bearcat {scheme}, to tol .01", n, conv), flush=True)
@@ -253,18 +280,25 @@ def compare(quick: bool) -> None:
 
 def game(quick: bool) -> None:
     """The two-stage game at 45^4 and 65^4 (21^4 when quick): time, peak memory, queries."""
-    print(f"two-stage capture-the-flag on {GAME_MAP} (R_A then W_A), WENO5 to convergence, speeds {GAME_SPEED} m/s, "
-          f"r_c {GAME_CAPTURE_RADIUS} m, horizons {GAME_HORIZON} s; guidance query medians over 190 random states")
-    print(f"{'grid':>6} {'seconds':>8} {'peak MB':>8} {'R_A conv s':>10} {'W_A conv s':>10} "
-          f"{'value ms':>9} {'slices ms':>9} {'polys ms':>9} {'total ms':>9}")  # fmt: skip
+    print(
+        f"two-stage capture-the-flag on {GAME_MAP} (R_A then W_A), WENO5 to convergence, speeds {GAME_SPEED} m/s, "
+        f"r_c {GAME_CAPTURE_RADIUS} m, horizons {GAME_HORIZON} s; guidance query medians over 190 random states"
+    )
+    print(
+        f"{'grid':>6} {'seconds':>8} {'peak MB':>8} {'R_A conv s':>10} {'W_A conv s':>10} "
+        f"{'value ms':>9} {'slices ms':>9} {'polys ms':>9} {'total ms':>9}"
+    )
     for n_game in (21,) if quick else (45, 65):
         with tempfile.TemporaryDirectory() as tmp:
             r = measure("game", n_game, "weno5", 0.0, 0.0, os.path.join(tmp, "unused.npy"))
         conv = [r["sets"][k]["converged_at"] for k in ("return", "win")]
         q = r["query_ms"]
-        print(f"{n_game:>4}^4 {r['seconds']:>8.1f} {r['peak_mb']:>8.0f} "
-              + " ".join(f"{c:>10.1f}" if c else f"{'-':>10}" for c in conv)
-              + f" {q['evaluate']:>9.3f} {q['slices']:>9.3f} {q['polygons']:>9.3f} {sum(q.values()):>9.3f}", flush=True)
+        print(
+            f"{n_game:>4}^4 {r['seconds']:>8.1f} {r['peak_mb']:>8.0f} "
+            + " ".join(f"{c:>10.1f}" if c else f"{'-':>10}" for c in conv)
+            + f" {q['evaluate']:>9.3f} {q['slices']:>9.3f} {q['polygons']:>9.3f} {sum(q.values()):>9.3f}",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -38,10 +38,24 @@ def main() -> None:
     run("pursuit_fmm.py")
     if args.table:
         with tempfile.TemporaryDirectory() as out:
-            print(f"== bearcat experiment pursuit, 9 cells x {args.trials} trials, {os.cpu_count()} workers", flush=True)
+            print(
+                f"== bearcat experiment pursuit, 9 cells x {args.trials} trials, {os.cpu_count()} workers", flush=True
+            )
             start = time.perf_counter()
-            subprocess.run([sys.executable, "-m", "bearcat", "experiment", "pursuit", "--trials", str(args.trials),
-                            "--out", os.path.join(out, "run")], check=True)  # fmt: skip
+            subprocess.run(
+                [
+                    sys.executable,
+                    "-m",
+                    "bearcat",
+                    "experiment",
+                    "pursuit",
+                    "--trials",
+                    str(args.trials),
+                    "--out",
+                    os.path.join(out, "run"),
+                ],
+                check=True,
+            )
             print(f"whole table: {(time.perf_counter() - start) / 60:.1f} min wall")
 
 

@@ -26,7 +26,7 @@ import time
 import numpy as np
 from shapely.geometry import Polygon
 
-from solvers.pursuit import ConvexAreaPursuit, area_minimising_headings
+from bearcat.solvers.pursuit import ConvexAreaPursuit, area_minimising_headings
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 STATES = 2000
@@ -56,13 +56,19 @@ def shapely_headings(domain: Polygon, evader: np.ndarray, pursuers: np.ndarray) 
         m = 0.5 * (evader + q)
         reach = 1e3
         cell = cell.intersection(
-            Polygon([m + reach * eta_v, m + reach * eta_v + reach * eta_h,
-                     m - reach * eta_v + reach * eta_h, m - reach * eta_v])  # fmt: skip
+            Polygon(
+                [
+                    m + reach * eta_v,
+                    m + reach * eta_v + reach * eta_h,
+                    m - reach * eta_v + reach * eta_h,
+                    m - reach * eta_v,
+                ]
+            )
         )
         frames.append((r, eta_h, eta_v, m))
     ring = np.asarray(cell.exterior.coords)
     headings = np.empty_like(pursuers)
-    for i, (q, (r, eta_h, eta_v, m)) in enumerate(zip(pursuers, frames)):
+    for i, (r, eta_h, eta_v, m) in enumerate(frames):
         headings[i] = eta_h
         # The line of control: the edge of the ring lying on the bisector.
         on = np.abs((ring - m) @ eta_h) < 1e-9
@@ -103,8 +109,9 @@ def main() -> None:
         ours = median_us(lambda e, p: area_minimising_headings(SQUARE, e, p), states)
         loop = median_us(strategy.headings, states)
         theirs = median_us(lambda e, p: shapely_headings(domain, e, p), states)
-        diff = max(np.abs(area_minimising_headings(SQUARE, e, p) - shapely_headings(domain, e, p)).max()
-                   for e, p in states)  # fmt: skip
+        diff = max(
+            np.abs(area_minimising_headings(SQUARE, e, p) - shapely_headings(domain, e, p)).max() for e, p in states
+        )
         print(f"{n:>8} {ours:>9.1f} {loop:>9.1f} {theirs:>8.1f} {theirs / ours:>6.1f}x {diff:>11.1e}")
     print("headings: area_minimising_headings; strategy: ConvexAreaPursuit.headings; ratio: shapely / headings")
 

@@ -20,8 +20,8 @@ import time
 
 import numpy as np
 
-from maps import load_map, rasterize
-from solvers.pursuit_fmm import FarthestPointEvader, FmmArena, FmmAreaPursuit, GeodesicPursuit
+from bearcat.maps import load_map, rasterize
+from bearcat.solvers.pursuit_fmm import FarthestPointEvader, FmmAreaPursuit, FmmArena, GeodesicPursuit
 
 MAPS = ("triangle-10", "maze-10")
 SPACING = 0.1
@@ -71,7 +71,7 @@ def main() -> None:
             arena = FmmArena(raster.grid, raster.speed)
             pursuit, evader = FmmAreaPursuit(arena), FarthestPointEvader(arena)
 
-            def game_step(e, ps):
+            def game_step(e, ps, evader=evader, pursuit=pursuit):
                 evader.target = None  # a fresh target every step: the dearer case
                 evader.heading(e, ps)
                 pursuit.headings(e, ps)

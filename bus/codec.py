@@ -14,9 +14,9 @@ from collections import Counter
 
 import msgspec
 
-from bus import keys
-from bus.errors import BusError
-from bus.messages import AnyMessage, Control, Detection, Fix, GameState, Guidance, Message, Truth, UavTask
+from bearcat.bus import keys
+from bearcat.bus.errors import BusError
+from bearcat.bus.messages import AnyMessage, Control, Detection, Fix, GameState, Guidance, Message, Truth, UavTask
 
 log = logging.getLogger(__name__)
 
@@ -71,7 +71,9 @@ def decode(payload: bytes, key: str | None = None) -> Message:
             raise Refused("foreign key", f"key {key!r} carries no messages")
         kind, field = expected
         if not isinstance(message, kind):
-            raise Refused("wrong kind", f"a {type(message).__name__} on {key!r}, which carries {kind.__name__} messages")
+            raise Refused(
+                "wrong kind", f"a {type(message).__name__} on {key!r}, which carries {kind.__name__} messages"
+            )
         if field is not None and getattr(message, field) != parsed.agent:
             raise Refused("wrong name", f"a {kind.__name__} for {getattr(message, field)!r} on {key!r}")
     return message
@@ -95,7 +97,7 @@ class Inbox:
             return decode(bytes(payload), str(key))
         except Refused as exc:
             self._drop(str(key), exc.category, str(exc))
-        except Exception as exc:  # noqa: BLE001 - nothing a sender does may crash the peer
+        except Exception as exc:
             self._drop(str(key), "unexpected", f"{type(exc).__name__}: {exc}")
         return None
 

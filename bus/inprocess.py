@@ -23,7 +23,7 @@ from collections.abc import Callable
 
 import zenoh
 
-from bus.errors import BusError
+from bearcat.bus.errors import BusError
 
 log = logging.getLogger(__name__)
 
@@ -79,7 +79,7 @@ class InProcessBus:
                     return
                 try:
                     callback(key, payload, sender)
-                except Exception:  # noqa: BLE001 - as Zenoh does: log, never unwind into the sender
+                except Exception:
                     log.exception("subscriber of %s on %s raised", receiver.name, key)
 
         return call
@@ -95,7 +95,9 @@ class InProcessBus:
         for receiver in list(self._sessions.values()):
             for sub_expr, callback in list(receiver._liveliness):
                 if sub_expr.intersects(expr):
-                    self._deliver(owner, receiver.name, key, None, self._call_liveliness(receiver, callback, key, alive))
+                    self._deliver(
+                        owner, receiver.name, key, None, self._call_liveliness(receiver, callback, key, alive)
+                    )
 
     @staticmethod
     def _call_liveliness(receiver, callback, key, alive):
@@ -103,7 +105,7 @@ class InProcessBus:
             if not receiver.closed:
                 try:
                     callback(key, alive)
-                except Exception:  # noqa: BLE001
+                except Exception:
                     log.exception("liveliness subscriber of %s on %s raised", receiver.name, key)
 
         return call

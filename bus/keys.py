@@ -22,7 +22,7 @@ import re
 from dataclasses import dataclass
 from functools import lru_cache
 
-from bus.errors import BusError
+from bearcat.bus.errors import BusError
 
 ROOT = "bearcat"
 ROLES = ("walker", "phone", "ground-station", "uav", "referee", "recorder", "launcher")

@@ -10,7 +10,7 @@ numbers, unknown fields and oversized lists before any agent sees them.
 from __future__ import annotations
 
 import math
-from typing import Annotated, Literal, Union
+from typing import Annotated, Literal
 
 import msgspec
 
@@ -161,5 +161,5 @@ class Detection(Message, tag="detection"):
     lon: Longitude
 
 
-AnyMessage = Union[Fix, Truth, Guidance, GameState, Control, UavTask, Detection]
+AnyMessage = Fix | Truth | Guidance | GameState | Control | UavTask | Detection
 MESSAGE_TYPES = (Fix, Truth, Guidance, GameState, Control, UavTask, Detection)

@@ -25,9 +25,9 @@ import threading
 
 import zenoh
 
-from bus import keys
-from bus.errors import BusError
-from bus.inprocess import Callback, LivelinessCallback
+from bearcat.bus import keys
+from bearcat.bus.errors import BusError
+from bearcat.bus.inprocess import Callback, LivelinessCallback
 
 log = logging.getLogger(__name__)
 
@@ -96,7 +96,7 @@ class ZenohSession:
             try:
                 sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else ""
                 callback(str(sample.key_expr), sample.payload.to_bytes(), sender)
-            except Exception:  # noqa: BLE001 - Zenoh would print and swallow it
+            except Exception:
                 self._callback_failed(key_expr)
 
         self._declared.append(self._session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample)))
@@ -111,7 +111,7 @@ class ZenohSession:
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 callback(str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
-            except Exception:  # noqa: BLE001
+            except Exception:
                 self._callback_failed(key_expr)
 
         subscriber = self._session.liveliness().declare_subscriber(
@@ -127,7 +127,7 @@ class ZenohSession:
         def on_query(query: zenoh.Query) -> None:
             try:
                 query.reply(key, reply())
-            except Exception:  # noqa: BLE001
+            except Exception:
                 self._callback_failed(key)
 
         self._declared.append(self._session.declare_queryable(key, zenoh.handlers.Callback(on_query)))

@@ -5,15 +5,15 @@ from __future__ import annotations
 from importlib import resources
 from pathlib import Path
 
-from maps.errors import MapError
-from maps.geojson import parse_geojson, read_geojson
-from maps.model import Map
+from bearcat.maps.errors import MapError
+from bearcat.maps.geojson import parse_geojson, read_geojson
+from bearcat.maps.model import Map
 
 SUFFIX = ".geojson"
 
 
 def _data():
-    return resources.files("maps") / "data"
+    return resources.files("bearcat.maps") / "data"
 
 
 def list_maps() -> list[str]:

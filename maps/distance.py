@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from solvers.grid import Grid
+from bearcat.solvers.grid import Grid
 
 
 def signed_distance(geometry, grid: Grid) -> np.ndarray:

@@ -17,9 +17,9 @@ import shapely
 from shapely.geometry import LineString, MultiLineString, MultiPolygon, Point, Polygon, mapping, shape
 from shapely.geometry.polygon import orient
 
-from maps import geodesy
-from maps.errors import MapError
-from maps.model import ROLES, Map, Region, Zone, check_origin, check_polygonal, check_speed
+from bearcat.maps import geodesy
+from bearcat.maps.errors import MapError
+from bearcat.maps.model import ROLES, Map, Region, Zone, check_origin, check_polygonal, check_speed
 
 log = logging.getLogger(__name__)
 

@@ -14,8 +14,8 @@ from functools import cached_property
 import shapely
 from shapely.geometry import MultiPolygon, Point, Polygon
 
-from maps import geodesy
-from maps.errors import MapError
+from bearcat.maps import geodesy
+from bearcat.maps.errors import MapError
 
 ROLES = ("flag", "return", "target", "side")
 

@@ -13,7 +13,7 @@ from matplotlib.patches import PathPatch
 from matplotlib.path import Path
 from shapely.geometry import MultiPolygon
 
-from maps.model import Map
+from bearcat.maps.model import Map
 
 SPEED_COLOURS = "YlGn_r"
 """Pale for fast ground (walkways), darker green for denser vegetation."""
@@ -69,8 +69,15 @@ def draw_map(ax, map: Map, *, zones: bool = True, labels: bool = True) -> Scalar
             spot = region.geometry.representative_point()
             label = f"{region.name}\n({region.team})" if region.team else region.name
             ax.text(
-                spot.x, spot.y, label, color=colour, fontsize=8, fontweight="bold",
-                ha="center", va="center", zorder=0.9,
+                spot.x,
+                spot.y,
+                label,
+                color=colour,
+                fontsize=8,
+                fontweight="bold",
+                ha="center",
+                va="center",
+                zorder=0.9,
             )
     xmin, ymin, xmax, ymax = map.bounds
     margin = 0.02 * max(xmax - xmin, ymax - ymin)

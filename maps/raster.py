@@ -12,10 +12,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from maps.errors import MapError
-from maps.model import Map
-from maps.scanline import coverage
-from solvers.grid import Grid
+from bearcat.maps.errors import MapError
+from bearcat.maps.model import Map
+from bearcat.maps.scanline import coverage
+from bearcat.solvers.grid import Grid
 
 log = logging.getLogger(__name__)
 

@@ -9,7 +9,7 @@ from dataclasses import dataclass, field, fields
 from importlib import resources
 from pathlib import Path
 
-from netem.models import DISTRIBUTIONS, CompassError, Delay, GilbertElliott, GpsError, LinkModel, Outage
+from bearcat.netem.models import DISTRIBUTIONS, CompassError, Delay, GilbertElliott, GpsError, LinkModel, Outage
 
 
 class ProfileError(ValueError):
@@ -27,14 +27,24 @@ class Profile:
 
 
 _LINK_KEYS = {
-    "delay", "jitter", "distribution", "loss", "burst", "duplicate", "reorder", "rate",
-    "idle_after", "promotion", "outages", "retransmit",
-}  # fmt: skip
+    "delay",
+    "jitter",
+    "distribution",
+    "loss",
+    "burst",
+    "duplicate",
+    "reorder",
+    "rate",
+    "idle_after",
+    "promotion",
+    "outages",
+    "retransmit",
+}
 _PROBABILITIES = {"loss", "duplicate", "reorder", "dropout", "urban_dropout"}
 
 
 def builtin_path():
-    return resources.files("netem") / "profiles.toml"
+    return resources.files("bearcat.netem") / "profiles.toml"
 
 
 def load_profiles(path: str | Path | None = None) -> dict[str, Profile]:

@@ -29,9 +29,9 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from bus import keys
-from bus.errors import BusError
-from netem.models import LinkModel
+from bearcat.bus import keys
+from bearcat.bus.errors import BusError
+from bearcat.netem.models import LinkModel
 
 # Keys the shim never impairs: the simulation's ground truth, the launcher's
 # control channel (a local wire in the field) and liveliness.
@@ -63,7 +63,7 @@ class Impairment:
 
 
 class _Link:
-    __slots__ = ("rng", "bad", "last_sent", "busy_until", "last_reliable")
+    __slots__ = ("bad", "busy_until", "last_reliable", "last_sent", "rng")
 
     def __init__(self, rng: np.random.Generator) -> None:
         self.rng = rng
@@ -119,7 +119,7 @@ class Shim:
         message comes back from ``poll`` with ``token``."""
         reliable, exempt = _kind(key)
         local = sender == receiver or (sender in self.colocated and receiver in self.colocated)
-        if exempt or local or self.model.ideal and self.dead_zones is None:
+        if exempt or local or (self.model.ideal and self.dead_zones is None):
             return [Delivery(now, payload)]
         if self._dead(sender, receiver):
             if reliable:

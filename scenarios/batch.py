@@ -15,10 +15,10 @@ from __future__ import annotations
 import json
 import logging
 import os
+from collections.abc import Callable, Iterable
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
-from typing import Callable, Iterable
 
 log = logging.getLogger(__name__)
 
@@ -120,7 +120,8 @@ def _run_local(todo, work, workers, record, out) -> None:
 
 def _run_dask(todo, work, scheduler, record, out) -> None:
     try:
-        from distributed import Client, as_completed as dask_completed
+        from distributed import Client
+        from distributed import as_completed as dask_completed
     except ImportError:
         raise BatchInterrupted(
             "a Dask scheduler was given but the 'distributed' package is not installed; pip install 'bearcat[cluster]'"

@@ -14,24 +14,28 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve, unresolved_capture
-from agents.ground_station.guidance import (
-    CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor, SearchAdvisor,
-)  # fmt: skip
-from agents.ground_station.referee import Contest, Referee
-from agents.ground_station.sight import Sight
-from agents.ground_station.uav_tasking import Uav, UavTasker
-from agents.human import behaviours
-from agents.human.agent import HumanAgent
-from agents.human.phone import Phone
-from agents.human.walker import Walker
-from agents.navigation import Navigator
-from agents.uav.agent import UavAgent
-from agents.uav.airframe import Airframe
-from agents.uav.autopilot import SimulatedAutopilot
-from netem.profiles import Profile
-from scenarios.schema import Scenario, ScenarioError
-from solvers.ctf_guidance import Guidance as CtfGuidance
+from bearcat.agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve, unresolved_capture
+from bearcat.agents.ground_station.guidance import (
+    CtfAdvisor,
+    GuidanceService,
+    PursuitAdvisor,
+    ReachAvoidAdvisor,
+    SearchAdvisor,
+)
+from bearcat.agents.ground_station.referee import Contest, Referee
+from bearcat.agents.ground_station.sight import Sight
+from bearcat.agents.ground_station.uav_tasking import Uav, UavTasker
+from bearcat.agents.human import behaviours
+from bearcat.agents.human.agent import HumanAgent
+from bearcat.agents.human.phone import Phone
+from bearcat.agents.human.walker import Walker
+from bearcat.agents.navigation import Navigator
+from bearcat.agents.uav.agent import UavAgent
+from bearcat.agents.uav.airframe import Airframe
+from bearcat.agents.uav.autopilot import SimulatedAutopilot
+from bearcat.netem.profiles import Profile
+from bearcat.scenarios.schema import Scenario, ScenarioError
+from bearcat.solvers.ctf_guidance import Guidance as CtfGuidance
 
 STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
 
@@ -65,8 +69,17 @@ class Cast:
 
 
 def cast(
-    scenario: Scenario, profile: Profile, seed: int, *, people=None, uavs=None, ground: bool = True,
-    ctf_progress=None, judge: str = "truth", autopilots=None, uav_truth: bool = True,
+    scenario: Scenario,
+    profile: Profile,
+    seed: int,
+    *,
+    people=None,
+    uavs=None,
+    ground: bool = True,
+    ctf_progress=None,
+    judge: str = "truth",
+    autopilots=None,
+    uav_truth: bool = True,
 ) -> Cast:
     """The agents of ``scenario``: the people named in ``people`` and the
     UAVs named in ``uavs`` (default: all of both if ``people`` is None, else
@@ -111,7 +124,9 @@ def _uav_spec(scenario: Scenario, uav: str):
     for spec in scenario.uavs:
         if spec.id == uav:
             return spec
-    raise ScenarioError(f"{scenario.source}: there is no UAV {uav!r}; the UAVs are {', '.join(u.id for u in scenario.uavs) or 'none'}")
+    raise ScenarioError(
+        f"{scenario.source}: there is no UAV {uav!r}; the UAVs are {', '.join(u.id for u in scenario.uavs) or 'none'}"
+    )
 
 
 class _CtfGame:
@@ -125,9 +140,13 @@ class _CtfGame:
         self.attacker, self.defender = attackers[0], defenders[0]
         game_map, r = scenario.map, scenario.rules
         self.rules = default_rules(
-            game_map, self.attacker.speed, self.defender.speed,
-            capture_radius=r["capture_radius"], capture_time=r["capture_time"], return_time=r["return_time"],
-        )  # fmt: skip
+            game_map,
+            self.attacker.speed,
+            self.defender.speed,
+            capture_radius=r["capture_radius"],
+            capture_time=r["capture_time"],
+            return_time=r["return_time"],
+        )
         coarse = unresolved_capture(game_map, r["grid"], self.rules.capture_radius)
         if coarse is not None:
             raise ScenarioError(
@@ -157,11 +176,15 @@ class _CtfGame:
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
-            runners=(self.attacker.id,), chasers=(self.defender.id,), capture_radius=self.rules.capture_radius,
-            time_limit=self.scenario.time_limit, teams=("attacker", "defender"),
+            runners=(self.attacker.id,),
+            chasers=(self.defender.id,),
+            capture_radius=self.rules.capture_radius,
+            time_limit=self.scenario.time_limit,
+            teams=("attacker", "defender"),
             targets=(("home", self.home),) if self.flag_taken else (("flag", self.flag), ("home", self.home)),
-            forbidden=(("flag", self.flag), ("return", self.home)), flag_taken=self.flag_taken,
-        )  # fmt: skip
+            forbidden=(("flag", self.flag), ("return", self.home)),
+            flag_taken=self.flag_taken,
+        )
         return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
 
     def guidance(self, progress=None) -> GuidanceService:
@@ -173,9 +196,14 @@ class _CtfGame:
             advisor = SearchAdvisor(advisor, self.tasker(), self.sight.side("attacker"))
         limited = self.sight.line_of_sight
         return GuidanceService(
-            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate,
+            s.name,
+            s.map,
+            s.ids,
+            advisor=advisor,
+            aided={a.id: a.aided for a in s.agents},
+            rate=s.guidance_rate,
             sight=self.sight if limited or s.uavs else None,
-        )  # fmt: skip
+        )
 
     def tasker(self) -> UavTasker:
         """The tasking of the attacking side's UAVs (thesis 6.2 searches for
@@ -183,24 +211,46 @@ class _CtfGame:
         if self._tasker is None:
             s = self.scenario
             if s.uav_of("defender"):
-                raise ScenarioError(f"{s.source}: only the attacker's side flies UAVs (thesis 6.2); uav {s.uav_of('defender')[0].id} is the defender's")
+                raise ScenarioError(
+                    f"{s.source}: only the attacker's side flies UAVs (thesis 6.2); "
+                    f"uav {s.uav_of('defender')[0].id} is the defender's"
+                )
             strategies = sorted({u.search for u in s.uavs})
             if len(strategies) > 1:
-                raise ScenarioError(f"{s.source}: the UAVs of a side search together, by one strategy; these mix {' and '.join(strategies)}")
+                raise ScenarioError(
+                    f"{s.source}: the UAVs of a side search together, by one strategy; "
+                    f"these mix {' and '.join(strategies)}"
+                )
             self._tasker = UavTasker(
-                s.name, s.map, uavs=[Uav(u.id, u.speed, u.camera_radius, u.altitude) for u in s.uavs],
-                attacker=self.attacker.id, defender=self.defender.id, defender_start=self.defender.start,
-                defender_speed=self.defender.speed, strategy=strategies[0], ctf=self.solved(), sight=self.sight,
-            )  # fmt: skip
+                s.name,
+                s.map,
+                uavs=[Uav(u.id, u.speed, u.camera_radius, u.altitude) for u in s.uavs],
+                attacker=self.attacker.id,
+                defender=self.defender.id,
+                defender_start=self.defender.start,
+                defender_speed=self.defender.speed,
+                strategy=strategies[0],
+                ctf=self.solved(),
+                sight=self.sight,
+            )
         return self._tasker
 
     def uav(self, spec, autopilot, truth: bool = True) -> UavAgent:
         opponents = [a.id for a in self.scenario.agents if a.team != spec.team]
         return UavAgent(
-            self.scenario.name, spec.id, autopilot, altitude=spec.altitude, camera_radius=spec.camera_radius,
-            watch=opponents, fix_rate=spec.fix_rate, failsafe=spec.failsafe, link_timeout=spec.link_timeout,
-            truth=truth, steer=spec.steer, speed=spec.speed,
-        )  # fmt: skip
+            self.scenario.name,
+            spec.id,
+            autopilot,
+            altitude=spec.altitude,
+            camera_radius=spec.camera_radius,
+            watch=opponents,
+            fix_rate=spec.fix_rate,
+            failsafe=spec.failsafe,
+            link_timeout=spec.link_timeout,
+            truth=truth,
+            steer=spec.steer,
+            speed=spec.speed,
+        )
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:
@@ -208,7 +258,9 @@ class _CtfGame:
         attacking = spec.team == "attacker"
         opponent = self.defender if attacking else self.attacker
         forbidden = None if attacking else self.flag.union(self.home)
-        situation = behaviours.Situation(spec.id, spec.team, (opponent.id,), self.goals[self.phase], forbidden, self._navigator)
+        situation = behaviours.Situation(
+            spec.id, spec.team, (opponent.id,), self.goals[self.phase], forbidden, self._navigator
+        )
         return _person(self.scenario, spec, profile, seed, situation, self.goals, self.phase, keep_out=forbidden)
 
 
@@ -221,7 +273,9 @@ class _PursuitGame:
         self.scenario = scenario
         free = scenario.map.free_space
         if not abs(free.area - free.convex_hull.area) <= 1e-9 * free.area:
-            raise ScenarioError(f"{scenario.source}: pursuit guidance needs a convex field; map {scenario.map.name} is not")
+            raise ScenarioError(
+                f"{scenario.source}: pursuit guidance needs a convex field; map {scenario.map.name} is not"
+            )
         evaders = scenario.team("evader")
         if len(evaders) != 1:
             raise ScenarioError(f"{scenario.source}: a pursuit game has one evader")
@@ -231,10 +285,13 @@ class _PursuitGame:
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
-            runners=(self.evader.id,), chasers=tuple(p.id for p in self.pursuers),
-            capture_radius=self.scenario.rules["capture_radius"], time_limit=self.scenario.time_limit,
-            teams=("evader", "pursuer"), lasting_wins=True,
-        )  # fmt: skip
+            runners=(self.evader.id,),
+            chasers=tuple(p.id for p in self.pursuers),
+            capture_radius=self.scenario.rules["capture_radius"],
+            time_limit=self.scenario.time_limit,
+            teams=("evader", "pursuer"),
+            lasting_wins=True,
+        )
         return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
 
     def guidance(self, progress=None) -> GuidanceService:
@@ -273,19 +330,27 @@ class _ReachAvoidGame:
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
-            runners=(self.attacker.id,), chasers=tuple(d.id for d in self.defenders), capture_radius=self.radius,
-            time_limit=self.scenario.time_limit, teams=("attacker", "defender"), targets=tuple(self.targets),
-        )  # fmt: skip
+            runners=(self.attacker.id,),
+            chasers=tuple(d.id for d in self.defenders),
+            capture_radius=self.radius,
+            time_limit=self.scenario.time_limit,
+            teams=("attacker", "defender"),
+            targets=tuple(self.targets),
+        )
         return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
         xmin, ymin, xmax, ymax = s.map.bounds
         advisor = ReachAvoidAdvisor(
-            s.map, attacker=self.attacker.id, defenders=[d.id for d in self.defenders],
-            targets=s.rules["targets"], speeds={a.id: a.speed for a in s.agents}, capture_radius=self.radius,
+            s.map,
+            attacker=self.attacker.id,
+            defenders=[d.id for d in self.defenders],
+            targets=s.rules["targets"],
+            speeds={a.id: a.speed for a in s.agents},
+            capture_radius=self.radius,
             spacing=s.rules["spacing"] or max(xmax - xmin, ymax - ymin) / 200,
-        )  # fmt: skip
+        )
         return GuidanceService(
             s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
         )
@@ -303,12 +368,21 @@ GAMES = {"ctf": _CtfGame, "pursuit": _PursuitGame, "reach-avoid": _ReachAvoidGam
 
 def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None) -> HumanAgent:
     walker = Walker(
-        scenario.map, spec.start, speed=spec.speed, reaction=spec.reaction, heading_error=spec.heading_error,
-        keep_out=keep_out, rng=stream(seed, spec.id, "walker"),
-    )  # fmt: skip
+        scenario.map,
+        spec.start,
+        speed=spec.speed,
+        reaction=spec.reaction,
+        heading_error=spec.heading_error,
+        keep_out=keep_out,
+        rng=stream(seed, spec.id, "walker"),
+    )
     phone = Phone(
-        spec.id, scenario.map, gps=profile.gps, compass=profile.compass, rng=stream(seed, spec.id, "phone"),
+        spec.id,
+        scenario.map,
+        gps=profile.gps,
+        compass=profile.compass,
+        rng=stream(seed, spec.id, "phone"),
         fix_rate=spec.fix_rate,
-    )  # fmt: skip
+    )
     behaviour = behaviours.make(spec.behaviour, spec.options, stream(seed, spec.id, "behaviour"))
     return HumanAgent(scenario.name, walker, phone, behaviour, situation, goals=goals, phase=phase)

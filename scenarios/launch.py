@@ -31,13 +31,13 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from agents.ground_station.recorder import EventLog
-from agents.ground_station.recording import finish_run
-from bus import keys
-from bus.codec import Inbox, encode
-from bus.messages import Control, GameState
-from bus.zenoh_session import ZenohSession, config
-from scenarios.schema import Scenario
+from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.agents.ground_station.recording import finish_run
+from bearcat.bus import keys
+from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.messages import Control, GameState
+from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.scenarios.schema import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -68,16 +68,45 @@ def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
     """The emulator of the scenario's UAV ``k``: system id k + 1, home where it takes off."""
     lat, lon = scenario.map.to_geodetic(*scenario.uavs[k].start)
     return [
-        sys.executable, "-m", "bearcat", "vehicle", "--connect", f"udpout:127.0.0.1:{port}", "--sysid", str(k + 1),
-        "--home", f"{lat:.8f},{lon:.8f},0", "--max-speed", str(scenario.uavs[k].speed),
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "bearcat",
+        "vehicle",
+        "--connect",
+        f"udpout:127.0.0.1:{port}",
+        "--sysid",
+        str(k + 1),
+        "--home",
+        f"{lat:.8f},{lon:.8f},0",
+        "--max-speed",
+        str(scenario.uavs[k].speed),
+    ]
 
 
-def peer_command(role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path) -> list[str]:
+def peer_command(
+    role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path
+) -> list[str]:
     return [
-        sys.executable, "-m", "bearcat", "peer", role, "--scenario", scenario_ref, "--id", agent,
-        "--connect", endpoint, "--mode", "client", "--seed", str(seed), "--netem", netem, "--out", str(out),
-    ]  # fmt: skip
+        sys.executable,
+        "-m",
+        "bearcat",
+        "peer",
+        role,
+        "--scenario",
+        scenario_ref,
+        "--id",
+        agent,
+        "--connect",
+        endpoint,
+        "--mode",
+        "client",
+        "--seed",
+        str(seed),
+        "--netem",
+        netem,
+        "--out",
+        str(out),
+    ]
 
 
 def launch(
@@ -129,28 +158,27 @@ def launch(
     started_at = None
     reason = None
     try:
+
+        def spawn(name: str, command: list[str]) -> None:
+            # The child keeps its own copy of the log's descriptor; ours closes at once.
+            with open(out / "peers" / f"{name}.log", "w") as logfile:
+                children[name] = subprocess.Popen(
+                    command, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+                )
+
         roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
         for role, name in roles:
-            logfile = open(out / "peers" / f"{name}.log", "w")
-            children[name] = subprocess.Popen(
-                peer_command(role, scenario_ref, name, endpoint, seed, netem, out),
-                stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            )  # fmt: skip
+            spawn(name, peer_command(role, scenario_ref, name, endpoint, seed, netem, out))
         for k, uav in enumerate(scenario.uavs):
             port = free_port(socket.SOCK_DGRAM)
-            logfile = open(out / "peers" / f"vehicle-{uav.id}.log", "w")
-            children[f"vehicle-{uav.id}"] = subprocess.Popen(
-                vehicle_command(scenario, k, port), stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
-            )
-            logfile = open(out / "peers" / f"{uav.id}.log", "w")
+            spawn(f"vehicle-{uav.id}", vehicle_command(scenario, k, port))
             fly = ["--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"]
-            children[uav.id] = subprocess.Popen(
-                peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out) + fly,
-                stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
-            )  # fmt: skip
+            spawn(uav.id, peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out) + fly)
         for name in keyboard:
-            say(f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
-                + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out)))  # fmt: skip
+            say(
+                f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
+                + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out))
+            )
         deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
         while True:
             with lock:
@@ -177,11 +205,14 @@ def launch(
         codes = _stop_all(session, game, children, final, lock, reason)
         state = final.get("state")
         outcome = LiveOutcome(
-            scenario=game, winner=state.winner if state else None,
+            scenario=game,
+            winner=state.winner if state else None,
             reason=state.reason if state else (reason or "stopped"),
             elapsed=state.elapsed if state else (0.0 if started_at is None else time.monotonic() - started_at),
-            ended=state is not None, peers=codes, out=str(out),
-        )  # fmt: skip
+            ended=state is not None,
+            peers=codes,
+            out=str(out),
+        )
         record.note(time.time(), "outcome", **vars(outcome))
         record.close()
         session.close()
@@ -216,7 +247,7 @@ def _stop_all(session, game: str, children, final, lock, reason) -> dict[str, in
     if not ended and children:
         try:
             session.put(keys.control(game), encode(Control(t=time.time(), command="stop", reason=(reason or "")[:200])))
-        except Exception:  # noqa: BLE001 - stopping must go on whatever the bus does
+        except Exception:
             log.exception("could not send the stop command")
     for signal_name in ("wait", "terminate", "kill"):
         deadline = time.monotonic() + STOP_WAIT

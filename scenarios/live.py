@@ -17,12 +17,12 @@ import asyncio
 import logging
 import signal
 
-from agents.ground_station.recorder import EventLog
-from bus import keys
-from bus.clock import WallClock
-from bus.codec import Inbox, encode
-from bus.messages import Control, GameState
-from netem.shim import Shim
+from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.bus import keys
+from bearcat.bus.clock import WallClock
+from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.messages import Control, GameState
+from bearcat.netem.shim import Shim
 
 log = logging.getLogger(__name__)
 
@@ -52,7 +52,7 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
             record.received(clock.now(), sender, agent.name, key, getattr(message, "seq", None))
             try:
                 publish(agent.handle(key, message, clock.now()))
-            except Exception:  # noqa: BLE001 - a message must never take the peer down
+            except Exception:
                 log.exception("%s failed on a message on %s", agent.name, key)
             if isinstance(message, GameState) and message.phase == "ended" and not finished.is_set():
                 why["reason"] = f"game ended: {message.reason}"
@@ -100,7 +100,7 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
             await asyncio.sleep(max(due - loop.time(), 0.0))
             try:
                 publish(agent.tick(clock.now()))
-            except Exception:  # noqa: BLE001
+            except Exception:
                 log.exception("%s failed on a tick", agent.name)
 
     async def poller():
@@ -130,19 +130,31 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
 
 
 def start_peer(
-    role: str, scenario, agent: str, *, connect, listen, seed: int, netem: str, out=None, mode="peer", judge="truth",
-    vehicle: str | None = None, sysid: int | None = None, emulated: bool = False,
+    role: str,
+    scenario,
+    agent: str,
+    *,
+    connect,
+    listen,
+    seed: int,
+    netem: str,
+    out=None,
+    mode="peer",
+    judge="truth",
+    vehicle: str | None = None,
+    sysid: int | None = None,
+    emulated: bool = False,
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
     A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
     an ``emulated`` vehicle's telemetry is the truth."""
     import shapely
 
-    from bus.errors import BusError
-    from bus.zenoh_session import ZenohSession, config
-    from netem.profiles import load_profile
-    from scenarios.cast import cast
-    from scenarios.schema import ScenarioError
+    from bearcat.bus.errors import BusError
+    from bearcat.bus.zenoh_session import ZenohSession, config
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import cast
+    from bearcat.scenarios.schema import ScenarioError
 
     profile = load_profile(netem)
     autopilot = None
@@ -150,20 +162,32 @@ def start_peer(
         players = cast(scenario, profile, seed, people=[], ground=True, judge=judge)
         agents, name = players.ground, players.guidance.name
     elif role == "uav":
-        from agents.uav.autopilot import MavsdkAutopilot
+        from bearcat.agents.uav.autopilot import MavsdkAutopilot
 
         if agent not in [u.id for u in scenario.uavs]:
-            raise ScenarioError(f"{scenario.source}: there is no UAV {agent!r}; the UAVs are "
-                                f"{', '.join(u.id for u in scenario.uavs) or 'none'}")  # fmt: skip
+            raise ScenarioError(
+                f"{scenario.source}: there is no UAV {agent!r}; the UAVs are "
+                f"{', '.join(u.id for u in scenario.uavs) or 'none'}"
+            )
         if not vehicle:
             raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
         autopilot = MavsdkAutopilot(vehicle, sysid=sysid)
-        players = cast(scenario, profile, seed, people=[], uavs=[agent], ground=False,
-                       autopilots={agent: autopilot}, uav_truth=emulated)  # fmt: skip
+        players = cast(
+            scenario,
+            profile,
+            seed,
+            people=[],
+            uavs=[agent],
+            ground=False,
+            autopilots={agent: autopilot},
+            uav_truth=emulated,
+        )
         agents, name = [players.uavs[agent]], agent
     elif role == "walker":
         if agent not in scenario.ids:
-            raise ScenarioError(f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}")
+            raise ScenarioError(
+                f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
+            )
         players = cast(scenario, profile, seed, people=[agent], ground=False)
         agents, name = [players.people[agent]], agent
     else:
@@ -176,7 +200,7 @@ def start_peer(
     session = ZenohSession(name, config(listen=listen, connect=connect, mode=mode))
     if role == "ground-station":
         # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.
-        from maps.geojson import dumps
+        from bearcat.maps.geojson import dumps
 
         geojson = dumps(scenario.map, units="metres").encode()
         session.serve(keys.map_query(scenario.name), lambda: geojson)
@@ -190,9 +214,13 @@ def start_peer(
 
         session.subscribe(keys.every(scenario.name, "truth"), on_truth)
     shim = Shim(
-        profile.link, seed, dead_zones=zones, where=positions.get if zones is not None else None,
-        record=record.impaired, colocated=(GROUND_PEERS),
-    )  # fmt: skip
+        profile.link,
+        seed,
+        dead_zones=zones,
+        where=positions.get if zones is not None else None,
+        record=record.impaired,
+        colocated=(GROUND_PEERS),
+    )
     keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
     if keyboard:
         _read_keys(keyboard[0].behaviour)
@@ -222,10 +250,10 @@ def fetch_scenario(game: str, connect, timeout: float = 10.0):
     """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``)."""
     import time
 
-    from bus.errors import BusError
-    from bus.zenoh_session import ZenohSession, config
-    from maps.geojson import parse_geojson
-    from scenarios.schema import parse_scenario
+    from bearcat.bus.errors import BusError
+    from bearcat.bus.zenoh_session import ZenohSession, config
+    from bearcat.maps.geojson import parse_geojson
+    from bearcat.scenarios.schema import parse_scenario
 
     session = ZenohSession(f"fetch-{int(time.time() * 1000) % 10**9}", config(connect=connect))
     try:
@@ -237,7 +265,9 @@ def fetch_scenario(game: str, connect, timeout: float = 10.0):
     finally:
         session.close()
     if text is None or geojson is None:
-        raise BusError(f"no ground station of game {game!r} answered at {', '.join(connect) or 'the default endpoints'}")
+        raise BusError(
+            f"no ground station of game {game!r} answered at {', '.join(connect) or 'the default endpoints'}"
+        )
     game_map = parse_geojson(geojson.decode(), source=f"the map of game {game}", default_name=game)
     return parse_scenario(text.decode(), source=f"the scenario of game {game}", game_map=game_map)
 
@@ -249,7 +279,7 @@ def _read_keys(behaviour) -> None:
     import threading
     import tty
 
-    from scenarios.schema import ScenarioError
+    from bearcat.scenarios.schema import ScenarioError
 
     if not sys.stdin.isatty():
         raise ScenarioError("the keyboard behaviour needs a terminal: start this peer from one")

@@ -29,8 +29,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from maps import load_map, rasterize
-from solvers.pursuit_game import pursue
+from bearcat.maps import load_map, rasterize
+from bearcat.solvers.pursuit_game import pursue
 
 THESIS_TABLE = {
     "square-10": (91.6, 98.2, 96.6),
@@ -61,14 +61,16 @@ def trial_tasks(domains, pursuer_counts, trials: int, seed: int, setup: PursuitS
         d = zlib.crc32(domain.encode())
         for n in pursuer_counts:
             for index in range(trials):
-                tasks.append({
-                    "key": f"{domain}/{n}/{index}",
-                    "domain": domain,
-                    "pursuers": int(n),
-                    "index": index,
-                    "seed": [int(seed), d, int(n), index],
-                    "setup": asdict(setup),
-                })  # fmt: skip
+                tasks.append(
+                    {
+                        "key": f"{domain}/{n}/{index}",
+                        "domain": domain,
+                        "pursuers": int(n),
+                        "index": index,
+                        "seed": [int(seed), d, int(n), index],
+                        "setup": asdict(setup),
+                    }
+                )
     return tasks
 
 
@@ -85,10 +87,17 @@ def run_trial(task: dict) -> dict:
         # fronts and the safe set one computes for a state serve the other.
         arena = domain.arena()
         chase = pursue(
-            domain.strategy(name, arena), domain.evader(arena), evader, pursuers, passable=domain.passable, dt=setup.dt,
-            capture_radius=setup.capture_radius, evader_speed=setup.speed, pursuer_speeds=setup.speed,
+            domain.strategy(name, arena),
+            domain.evader(arena),
+            evader,
+            pursuers,
+            passable=domain.passable,
+            dt=setup.dt,
+            capture_radius=setup.capture_radius,
+            evader_speed=setup.speed,
+            pursuer_speeds=setup.speed,
             max_time=setup.max_time,
-        )  # fmt: skip
+        )
         times[name] = chase.capture_time
     area, pure = (math.inf if times[k] is None else times[k] for k in ("area", "pure"))
     return {
@@ -192,31 +201,37 @@ class _Domain:
 
     def strategy(self, name: str, arena):
         if self.kind == "convex":
-            from solvers.pursuit import ConvexAreaPursuit, StraightPursuit
+            from bearcat.solvers.pursuit import ConvexAreaPursuit, StraightPursuit
 
             return ConvexAreaPursuit(self.polygon) if name == "area" else StraightPursuit()
-        from solvers.pursuit_fmm import FmmAreaPursuit, GeodesicPursuit
+        from bearcat.solvers.pursuit_fmm import FmmAreaPursuit, GeodesicPursuit
 
         if name == "area":
-            return FmmAreaPursuit(arena, evader_speed=self.speed, pursuer_speeds=self.speed,
-                                  capture_radius=self.capture_radius, gradient=self.gradient)  # fmt: skip
+            return FmmAreaPursuit(
+                arena,
+                evader_speed=self.speed,
+                pursuer_speeds=self.speed,
+                capture_radius=self.capture_radius,
+                gradient=self.gradient,
+            )
         return GeodesicPursuit(arena)
 
     def evader(self, arena):
         if self.kind == "convex":
-            from solvers.pursuit import ConvexFarthestPointEvader
+            from bearcat.solvers.pursuit import ConvexFarthestPointEvader
 
             return ConvexFarthestPointEvader(self.polygon, self.capture_radius)
-        from solvers.pursuit_fmm import FarthestPointEvader
+        from bearcat.solvers.pursuit_fmm import FarthestPointEvader
 
-        return FarthestPointEvader(arena, evader_speed=self.speed, pursuer_speeds=self.speed,
-                                   capture_radius=self.capture_radius)  # fmt: skip
+        return FarthestPointEvader(
+            arena, evader_speed=self.speed, pursuer_speeds=self.speed, capture_radius=self.capture_radius
+        )
 
     def arena(self):
         """The fast-marching arena of a non-convex domain (None for a convex one, which needs none)."""
         if self.kind == "convex":
             return None
-        from solvers.pursuit_fmm import FmmArena
+        from bearcat.solvers.pursuit_fmm import FmmArena
 
         return FmmArena(self.grid, self.raster_speed)
 

@@ -47,9 +47,9 @@ from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 
-from agents.uav.agent import FAILSAFES, STEERING
-from maps import Map, MapError, load_map
-from netem.profiles import ProfileError, load_profile
+from bearcat.agents.uav.agent import FAILSAFES, STEERING
+from bearcat.maps import Map, MapError, load_map
+from bearcat.netem.profiles import ProfileError, load_profile
 
 GAMES = ("ctf", "reach-avoid", "pursuit")
 TEAMS = {"ctf": ("attacker", "defender"), "reach-avoid": ("attacker", "defender"), "pursuit": ("evader", "pursuer")}
@@ -58,8 +58,14 @@ SEARCHES = ("reachability", "lawnmower", "nearest")
 
 # Per game, the rules keys with their defaults (None: derived from the map and speeds).
 RULE_KEYS = {
-    "ctf": {"capture_radius": None, "stages": "return", "grid": 45, "capture_time": None, "return_time": None,
-            "visibility": "full"},
+    "ctf": {
+        "capture_radius": None,
+        "stages": "return",
+        "grid": 45,
+        "capture_time": None,
+        "return_time": None,
+        "visibility": "full",
+    },
     "reach-avoid": {"capture_radius": None, "targets": ["flag", "home"], "spacing": None},
     "pursuit": {"capture_radius": 0.5, "spacing": None, "strategy": "area"},
 }
@@ -74,15 +80,34 @@ BEHAVIOUR_OPTIONS = {
     "keyboard": {},
 }
 _AGENT_KEYS = {
-    "id", "team", "start", "speed", "behaviour", "aided", "fix_rate", "reaction", "heading_error", "options",
-}  # fmt: skip
+    "id",
+    "team",
+    "start",
+    "speed",
+    "behaviour",
+    "aided",
+    "fix_rate",
+    "reaction",
+    "heading_error",
+    "options",
+}
 
 
 # UAV keys and their defaults (None: required).
 UAV_KEYS = {
-    "id": None, "team": None, "start": None, "altitude": 20.0, "camera_radius": 15.0, "speed": 8.0, "accel": 3.0,
-    "search": "reachability", "failsafe": "hold", "link_timeout": 5.0, "fix_rate": 2.0, "steer": "goto",
-}  # fmt: skip
+    "id": None,
+    "team": None,
+    "start": None,
+    "altitude": 20.0,
+    "camera_radius": 15.0,
+    "speed": 8.0,
+    "accel": 3.0,
+    "search": "reachability",
+    "failsafe": "hold",
+    "link_timeout": 5.0,
+    "fix_rate": 2.0,
+    "steer": "goto",
+}
 
 
 class ScenarioError(ValueError):
@@ -138,9 +163,9 @@ class Scenario:
     description: str = ""
     text: str = ""  # the TOML it was read from, served to peers that ask
     dead_zones: tuple[tuple[tuple[float, float], ...], ...] = ()
-    uavs: tuple["UavSpec", ...] = ()
+    uavs: tuple[UavSpec, ...] = ()
 
-    def uav_of(self, team: str) -> list["UavSpec"]:
+    def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
 
     def team(self, name: str) -> list[AgentSpec]:
@@ -158,7 +183,7 @@ class Scenario:
 
 
 def builtin_dir():
-    return resources.files("scenarios") / "data"
+    return resources.files("bearcat.scenarios") / "data"
 
 
 def list_scenarios() -> list[str]:
@@ -356,8 +381,10 @@ def _rules(c: _Checker, given: dict, game: str, game_map: Map) -> dict:
             c.fail("rules.targets must be a list of region names of the map")
         for name in targets:
             if not isinstance(name, str) or name not in game_map.regions:
-                c.fail(f"rules.targets: map {game_map.name} has no region {name!r}; its regions are "
-                       f"{', '.join(game_map.regions) or 'none'}")  # fmt: skip
+                c.fail(
+                    f"rules.targets: map {game_map.name} has no region {name!r}; its regions are "
+                    f"{', '.join(game_map.regions) or 'none'}"
+                )
     else:
         rules["strategy"] = c.choice(rules, "strategy", ("area", "pure"), "rules")
     return rules

@@ -19,15 +19,15 @@ from pathlib import Path
 import shapely
 import simpy
 
-from agents.ground_station.recorder import EventLog
-from bus import keys
-from bus.codec import Inbox, encode
-from bus.inprocess import InProcessBus
-from bus.messages import Control, GameState
-from netem.profiles import load_profile
-from netem.shim import Shim
-from scenarios.cast import cast
-from scenarios.schema import Scenario
+from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.bus import keys
+from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.inprocess import InProcessBus
+from bearcat.bus.messages import Control, GameState
+from bearcat.netem.profiles import load_profile
+from bearcat.netem.shim import Shim
+from bearcat.scenarios.cast import cast
+from bearcat.scenarios.schema import Scenario
 
 log = logging.getLogger(__name__)
 
@@ -80,9 +80,13 @@ def simulate(
 
     ground = (*(a.name for a in players.ground), LAUNCHER)
     shim = Shim(
-        profile.link, seed, dead_zones=zones, where=where if zones is not None else None, record=record.impaired,
+        profile.link,
+        seed,
+        dead_zones=zones,
+        where=where if zones is not None else None,
+        record=record.impaired,
         colocated=ground,
-    )  # fmt: skip
+    )
 
     def arrive(call, payload):
         return lambda _event: call(payload)
@@ -171,15 +175,19 @@ def simulate(
 
     state = final.get("state")
     outcome = Outcome(
-        scenario=scenario.name, seed=seed, netem=profile.name,
+        scenario=scenario.name,
+        seed=seed,
+        netem=profile.name,
         winner=state.winner if state else None,
         reason=state.reason if state else f"no result within {scenario.time_limit + GRACE:g} s of game time",
-        elapsed=state.elapsed if state else env.now, ended=state is not None,
-        flag_holder=state.flag_holder if state else None, captured=list(state.captured) if state else [],
+        elapsed=state.elapsed if state else env.now,
+        ended=state is not None,
+        flag_holder=state.flag_holder if state else None,
+        captured=list(state.captured) if state else [],
         counts=dict(sorted(record.counts.items())),
         drops={name: dict(inbox.drops) for name, inbox in inboxes.items() if inbox.dropped},
         notes=_notes(players),
-    )  # fmt: skip
+    )
     record.note(env.now, "outcome", **{k: v for k, v in vars(outcome).items() if k != "counts"})
     record.close()
     for _, session in sessions:

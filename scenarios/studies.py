@@ -43,8 +43,8 @@ def play_task(task: dict) -> dict:
     import tempfile
     from dataclasses import asdict, replace
 
-    from scenarios.schema import load_scenario
-    from scenarios.simulate import simulate
+    from bearcat.scenarios.schema import load_scenario
+    from bearcat.scenarios.simulate import simulate
 
     scenario = load_scenario(task["scenario"])
     if task.get("search") is not None:
@@ -56,14 +56,22 @@ def play_task(task: dict) -> dict:
         went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
         true_value = None if went is None else _true_value(scenario, events, went)
     found = [v for k, v in outcome.notes.items() if k.endswith(".found_at")]
-    return {**row, "key": task["key"], "scenario": task["scenario"], "seed": task["seed"], "went_at": went,
-            "true_value": true_value, "search": task.get("search"), "found_at": min(found) if found else None}  # fmt: skip
+    return {
+        **row,
+        "key": task["key"],
+        "scenario": task["scenario"],
+        "seed": task["seed"],
+        "went_at": went,
+        "true_value": true_value,
+        "search": task.get("search"),
+        "found_at": min(found) if found else None,
+    }
 
 
 def _true_value(scenario, events: str, t: float) -> float | None:
     """The capture-the-flag value at the players' true positions at time ``t``."""
-    from agents.ground_station.recorder import read_events
-    from scenarios.cast import _CtfGame
+    from bearcat.agents.ground_station.recorder import read_events
+    from bearcat.scenarios.cast import _CtfGame
 
     if scenario.game != "ctf":
         return None
@@ -92,13 +100,22 @@ def summarise(results) -> list[dict]:
         went = [g for g in games if g["went_at"] is not None]
         good = sum(g["winner"] == "attacker" for g in went)
         real = [g for g in went if g.get("true_value") is not None and g["true_value"] <= 0]
-        rows.append({
-            "scenario": scenario, "netem": netem, "games": len(games), "attacker_wins": wins,
-            "attacker_win_rate": round(wins / len(games), 3), "goes": len(went), "goes_won": good,
-            "false_goes": len(went) - good, "false_go_rate": round((len(went) - good) / len(went), 3) if went else None,
-            "median_go_time": _median([g["went_at"] for g in went]),
-            "goes_really_open": len(real), "really_open_won": sum(g["winner"] == "attacker" for g in real),
-        })  # fmt: skip
+        rows.append(
+            {
+                "scenario": scenario,
+                "netem": netem,
+                "games": len(games),
+                "attacker_wins": wins,
+                "attacker_win_rate": round(wins / len(games), 3),
+                "goes": len(went),
+                "goes_won": good,
+                "false_goes": len(went) - good,
+                "false_go_rate": round((len(went) - good) / len(went), 3) if went else None,
+                "median_go_time": _median([g["went_at"] for g in went]),
+                "goes_really_open": len(real),
+                "really_open_won": sum(g["winner"] == "attacker" for g in real),
+            }
+        )
     return rows
 
 
@@ -114,12 +131,18 @@ def summarise_search(results) -> list[dict]:
         found = [g["found_at"] for g in games if g.get("found_at") is not None]
         wins = sum(g["winner"] == "attacker" for g in games)
         low, high = wilson(wins, len(games))
-        rows.append({
-            "search": search, "games": len(games), "found": len(found), "median_time_to_find": _median(found),
-            "mean_time_to_find": round(sum(found) / len(found), 2) if found else None,
-            "attacker_wins": wins, "attacker_win_rate": round(wins / len(games), 3),
-            "win_rate_95": [round(low, 3), round(high, 3)],
-        })  # fmt: skip
+        rows.append(
+            {
+                "search": search,
+                "games": len(games),
+                "found": len(found),
+                "median_time_to_find": _median(found),
+                "mean_time_to_find": round(sum(found) / len(found), 2) if found else None,
+                "attacker_wins": wins,
+                "attacker_win_rate": round(wins / len(games), 3),
+                "win_rate_95": [round(low, 3), round(high, 3)],
+            }
+        )
     return rows
 
 

@@ -31,17 +31,17 @@ map into an ``Arena`` and caching solutions on disk live at the edges.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Callable
 
 import numpy as np
 
-from solvers.errors import InputError
-from solvers.grid import Grid
-from solvers.hamiltonians import Player, SimpleMotion
-from solvers.hji import PaddedField, ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
+from bearcat.solvers.hamiltonians import Player, SimpleMotion
+from bearcat.solvers.hji import PaddedField, ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
 
-__all__ = ["Arena", "CtfSolution", "Rules", "SetSolution", "STAGES", "required_game_bytes", "solve_ctf"]
+__all__ = ["STAGES", "Arena", "CtfSolution", "Rules", "SetSolution", "required_game_bytes", "solve_ctf"]
 
 STAGES = {
     "return": ("return",),  # R_A only: the flag-return game of the field trials (3.5)
@@ -151,7 +151,7 @@ class SetSolution:
         return self.value <= 0
 
     @classmethod
-    def from_result(cls, name: str, result: ReachAvoidResult) -> "SetSolution":
+    def from_result(cls, name: str, result: ReachAvoidResult) -> SetSolution:
         return cls(name, result.value, result.converged, result.converged_at, result.time, result.steps, result.tstar)
 
 
@@ -235,10 +235,20 @@ def solve_ctf(
         target = _target(name, arena, forfeit, sets, dtype)
         report = None if progress is None else (lambda t, change, n=name, h=horizon: progress(n, t, h, change))
         result = solve_reach_avoid(
-            grid, game, target, avoid, horizon=horizon, scheme=scheme, dtype=dtype,
-            tol=tol * min(arena.grid.spacing), check_every=_check_window(arena, rules),
-            record_tstar=True, record_gradient=False, progress=report, memory_limit=limit,
-        )  # fmt: skip
+            grid,
+            game,
+            target,
+            avoid,
+            horizon=horizon,
+            scheme=scheme,
+            dtype=dtype,
+            tol=tol * min(arena.grid.spacing),
+            check_every=_check_window(arena, rules),
+            record_tstar=True,
+            record_gradient=False,
+            progress=report,
+            memory_limit=limit,
+        )
         del target
         sets[name] = SetSolution.from_result(name, result)
     return CtfSolution(arena, rules, sets)

@@ -19,6 +19,7 @@ obstacle is refused rather than extrapolated.
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass
 
@@ -27,10 +28,10 @@ import numba
 import numpy as np
 import shapely
 
-from solvers.ctf import EDGE_SLACK, CtfSolution, SetSolution
-from solvers.errors import InputError
+from bearcat.solvers.ctf import EDGE_SLACK, CtfSolution, SetSolution
+from bearcat.solvers.errors import InputError
 
-__all__ = ["Guidance", "StateReport", "PHASES"]
+__all__ = ["PHASES", "Guidance", "StateReport"]
 
 PHASES = ("capture", "return")
 
@@ -157,7 +158,7 @@ class Guidance:
         points, offsets = generator.filled(lower, upper)
         shapes = []
         for outline, cuts in zip(points, offsets):
-            rings = [outline[a:b] for a, b in zip(cuts[:-1], cuts[1:]) if b - a >= 4]
+            rings = [outline[a:b] for a, b in itertools.pairwise(cuts) if b - a >= 4]
             if rings:
                 shapes.append(shapely.Polygon(rings[0], rings[1:]))
         # Nodes exactly at zero (on a region's edge, where a signed distance
@@ -165,8 +166,12 @@ class Guidance:
         # edge; repair them into a valid shape of the same area.
         region = shapely.make_valid(shapely.MultiPolygon(shapes)) if shapes else shapely.MultiPolygon()
         parts = shapely.get_parts(region)
-        polygons = [p for part in parts for p in shapely.get_parts(part) if isinstance(p, shapely.Polygon) and p.area > 0]
-        return shapely.MultiPolygon(shapely.get_parts(shapely.union_all(polygons))) if polygons else shapely.MultiPolygon()
+        polygons = [
+            p for part in parts for p in shapely.get_parts(part) if isinstance(p, shapely.Polygon) and p.area > 0
+        ]
+        return (
+            shapely.MultiPolygon(shapely.get_parts(shapely.union_all(polygons))) if polygons else shapely.MultiPolygon()
+        )
 
 
 def _unit(v: np.ndarray) -> tuple[float, float] | None:
@@ -184,8 +189,9 @@ def interpolate_2d(a, lo, spacing, point):
     f1 = min(max((point[1] - lo[1]) / spacing[1], 0.0), n1 - 1.0)
     i0, i1 = min(int(f0), n0 - 2), min(int(f1), n1 - 2)
     t0, t1 = f0 - i0, f1 - i1
-    return ((1 - t0) * ((1 - t1) * a[i0, i1] + t1 * a[i0, i1 + 1])
-            + t0 * ((1 - t1) * a[i0 + 1, i1] + t1 * a[i0 + 1, i1 + 1]))  # fmt: skip
+    return (1 - t0) * ((1 - t1) * a[i0, i1] + t1 * a[i0, i1 + 1]) + t0 * (
+        (1 - t1) * a[i0 + 1, i1] + t1 * a[i0 + 1, i1 + 1]
+    )
 
 
 @numba.njit(cache=True)
@@ -305,12 +311,20 @@ def _slice(v, lo, spacing, point, held_first):
         out = np.empty((n[2], n[3]))
         for a in range(n[2]):
             for b in range(n[3]):
-                out[a, b] = (w00 * v[i0, i1, a, b] + w01 * v[i0, i1 + 1, a, b]
-                             + w10 * v[i0 + 1, i1, a, b] + w11 * v[i0 + 1, i1 + 1, a, b])  # fmt: skip
+                out[a, b] = (
+                    w00 * v[i0, i1, a, b]
+                    + w01 * v[i0, i1 + 1, a, b]
+                    + w10 * v[i0 + 1, i1, a, b]
+                    + w11 * v[i0 + 1, i1 + 1, a, b]
+                )
     else:
         out = np.empty((n[0], n[1]))
         for a in range(n[0]):
             for b in range(n[1]):
-                out[a, b] = (w00 * v[a, b, i0, i1] + w01 * v[a, b, i0, i1 + 1]
-                             + w10 * v[a, b, i0 + 1, i1] + w11 * v[a, b, i0 + 1, i1 + 1])  # fmt: skip
+                out[a, b] = (
+                    w00 * v[a, b, i0, i1]
+                    + w01 * v[a, b, i0, i1 + 1]
+                    + w10 * v[a, b, i0 + 1, i1]
+                    + w11 * v[a, b, i0 + 1, i1 + 1]
+                )
     return out

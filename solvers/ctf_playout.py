@@ -6,20 +6,21 @@ The attacker plays the first-stage strategy (from W_A, or F_A) until it
 stands in the flag, then the flag-return strategy (from R_A): the switch of
 3.3.2. Where W_A is lost but F_A is solved and won, the attacker still goes
 for the flag on the F_A strategy, as in thesis Fig. 3.5a: a defender that
-wins the whole game then lets it take the flag and blocks the return. Each step moves a player at its top speed times the terrain factor
+wins the whole game then lets it take the flag and blocks the return. Each
+step moves a player at its top speed times the terrain factor
 where it stands, forward Euler with a step of a quarter cell, so neither can
 jump a capture disk or an obstacle edge between referee checks.
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from solvers.ctf_guidance import Guidance, StateReport, interpolate_2d
-from solvers.errors import InputError
+from bearcat.solvers.ctf_guidance import Guidance, StateReport, interpolate_2d
+from bearcat.solvers.errors import InputError
 
 __all__ = ["Playout", "play"]
 
@@ -132,5 +133,6 @@ def play(
         phases.append(phase)
     if not phases:
         phases.append(phase)
-    return Playout(np.asarray(times), np.asarray(a_track), np.asarray(d_track), tuple(phases), winner, reason, flag_time)
-
+    return Playout(
+        np.asarray(times), np.asarray(a_track), np.asarray(d_track), tuple(phases), winner, reason, flag_time
+    )

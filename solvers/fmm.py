@@ -18,8 +18,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from solvers.errors import InputError
-from solvers.grid import Grid
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
 
 __all__ = ["Descent", "descend", "point_source", "time_to_capture", "travel_time"]
 
@@ -592,14 +592,14 @@ def _descend(phi, stop, hx, hy, px, py, max_steps):
             if norm > 0.0:
                 qx = px - step * gx / (norm * hx)
                 qy = py - step * gy / (norm * hy)
-                if 0.0 <= qx <= nx - 1.0 and 0.0 <= qy <= ny - 1.0:
-                    if phi[int(qx + 0.5), int(qy + 0.5)] < np.inf:
-                        vq, _, _ = _sample(phi, qx, qy, hx, hy)
-                        if vq < v:
-                            px = qx
-                            py = qy
-                            v = vq
-                            moved = True
+                inside = 0.0 <= qx <= nx - 1.0 and 0.0 <= qy <= ny - 1.0
+                if inside and phi[int(qx + 0.5), int(qy + 0.5)] < np.inf:
+                    vq, _, _ = _sample(phi, qx, qy, hx, hy)
+                    if vq < v:
+                        px = qx
+                        py = qy
+                        v = vq
+                        moved = True
             if not moved:
                 # The lowest finite node around; a diagonal move needs an open
                 # side so it cannot slip between two blocked nodes.
@@ -608,9 +608,7 @@ def _descend(phi, stop, hx, hy, px, py, max_steps):
                 best = v
                 for a in range(max(ix - 1, 0), min(ix + 2, nx)):
                     for b in range(max(iy - 1, 0), min(iy + 2, ny)):
-                        if phi[a, b] < best and (
-                            a == ix or b == iy or phi[a, iy] < np.inf or phi[ix, b] < np.inf
-                        ):
+                        if phi[a, b] < best and (a == ix or b == iy or phi[a, iy] < np.inf or phi[ix, b] < np.inf):
                             best = phi[a, b]
                             bx = a
                             by = b

@@ -34,7 +34,7 @@ class Grid:
             raise ValueError(f"a grid needs at least two nodes per axis, got shape {self.shape}")
 
     @classmethod
-    def covering(cls, lo, hi, spacing: float) -> "Grid":
+    def covering(cls, lo, hi, spacing: float) -> Grid:
         """The grid of uniform ``spacing`` whose first node is ``lo`` and whose
         last node is the first at or beyond ``hi``, so the box is fully sampled."""
         lo = tuple(float(v) for v in lo)
@@ -48,7 +48,7 @@ class Grid:
         return cls(lo, (spacing,) * len(lo), shape)
 
     @classmethod
-    def spanning(cls, lo, hi, shape) -> "Grid":
+    def spanning(cls, lo, hi, shape) -> Grid:
         """The grid with ``shape`` nodes per axis, first node on ``lo`` and last on ``hi``."""
         lo = tuple(float(v) for v in lo)
         hi = tuple(float(v) for v in hi)

@@ -27,18 +27,19 @@ simple motion, ``|f0_k| + |G_k.| u_max + |K_k.| d_max`` for affine dynamics.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, NamedTuple
+from typing import NamedTuple
 
 import numba
 import numpy as np
 from numba.core.types.function_type import CompileResultWAP
 
-from solvers import hji_kernels as kern
-from solvers.errors import InputError
-from solvers.grid import Grid
+from bearcat.solvers import hji_kernels as kern
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
 
-__all__ = ["Ball", "Box", "ControlAffine", "Player", "SimpleMotion", "DYNAMICS_SIGNATURE"]
+__all__ = ["DYNAMICS_SIGNATURE", "Ball", "Box", "ControlAffine", "Player", "SimpleMotion"]
 
 DYNAMICS_SIGNATURE = kern.DYNAMICS_SIGNATURE
 """``dynamics(x, f0, G, K)``: float64 state ``x`` (n,) in, fills ``f0`` (n,),
@@ -62,7 +63,7 @@ class SimpleMotion:
     players: tuple[Player, ...]
 
     @classmethod
-    def pursuit(cls, attacker_speed, defender_speed, dims: int = 2) -> "SimpleMotion":
+    def pursuit(cls, attacker_speed, defender_speed, dims: int = 2) -> SimpleMotion:
         """The attacker (control) on axes ``0..dims-1`` against the defender
         (disturbance) on the next ``dims`` axes: the game of thesis 3.1."""
         attacker = Player(tuple(range(dims)), attacker_speed, "control")
@@ -172,9 +173,13 @@ def _lower_simple_motion(h: SimpleMotion, grid: Grid, dtype) -> Lowered:
         np.zeros(grid.ndim),
         np.ones(grid.ndim),
         _NO_DYNAMICS,
-        kern.NO_INPUT, _EMPTY_F, _EMPTY_F,
-        kern.NO_INPUT, _EMPTY_F, _EMPTY_F,
-    )  # fmt: skip
+        kern.NO_INPUT,
+        _EMPTY_F,
+        _EMPTY_F,
+        kern.NO_INPUT,
+        _EMPTY_F,
+        _EMPTY_F,
+    )
     return Lowered(args, rate)
 
 

@@ -56,19 +56,19 @@ from __future__ import annotations
 import math
 import numbers
 import os
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from typing import Callable
 
 import numba
 import numpy as np
 
-from solvers import hji_kernels as kern
-from solvers.errors import InputError
-from solvers.grid import Grid
-from solvers.hamiltonians import lower
+from bearcat.solvers import hji_kernels as kern
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
+from bearcat.solvers.hamiltonians import lower
 
-__all__ = ["PaddedField", "ReachAvoidResult", "SCHEMES", "required_bytes", "solve_reach_avoid"]
+__all__ = ["SCHEMES", "PaddedField", "ReachAvoidResult", "required_bytes", "solve_reach_avoid"]
 
 
 @dataclass(frozen=True)
@@ -133,7 +133,12 @@ class PaddedField:
 
 
 def required_bytes(
-    grid: Grid, *, scheme: str = "weno5", dtype=np.float32, has_avoid: bool = True, record_tstar: bool = False,
+    grid: Grid,
+    *,
+    scheme: str = "weno5",
+    dtype=np.float32,
+    has_avoid: bool = True,
+    record_tstar: bool = False,
     record_gradient: bool = True,
 ) -> int:
     """Bytes of the arrays a solve allocates: the time-stepping buffers, the
@@ -206,8 +211,14 @@ def solve_reach_avoid(
     target = _grid_field("target", target, grid, dtype)
     avoid = None if avoid is None else _grid_field("avoid", avoid, grid, dtype)
     limit = available_bytes() if memory_limit is None else int(memory_limit)
-    need = required_bytes(grid, scheme=scheme, dtype=dtype, has_avoid=avoid is not None, record_tstar=record_tstar,
-                          record_gradient=record_gradient)  # fmt: skip
+    need = required_bytes(
+        grid,
+        scheme=scheme,
+        dtype=dtype,
+        has_avoid=avoid is not None,
+        record_tstar=record_tstar,
+        record_gradient=record_gradient,
+    )
     if need > limit:
         dims = "x".join(str(n) for n in grid.shape)
         raise InputError(
@@ -301,8 +312,21 @@ class _Stepper:
         cast = self.dtype.type
         for i, ((a, b), v, out) in enumerate(zip(_SHU_OSHER[self.stages], sources, outs)):
             final = i == self.stages - 1
-            args = (v, u, out, cast(a), cast(b), cast(dt), final, self.monotone, *self.fixed,
-                    self.record and final, t, self.tstar, self.tgrad)  # fmt: skip
+            args = (
+                v,
+                u,
+                out,
+                cast(a),
+                cast(b),
+                cast(dt),
+                final,
+                self.monotone,
+                *self.fixed,
+                self.record and final,
+                t,
+                self.tstar,
+                self.tgrad,
+            )
             if len(self.ranges) == 1:
                 kern.stage(*self.ranges[0], *args)
             else:

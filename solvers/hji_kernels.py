@@ -34,9 +34,7 @@ NO_INPUT = 0
 BOX = 1
 BALL = 2
 
-DYNAMICS_SIGNATURE = types.void(
-    types.float64[::1], types.float64[::1], types.float64[:, ::1], types.float64[:, ::1]
-)
+DYNAMICS_SIGNATURE = types.void(types.float64[::1], types.float64[::1], types.float64[:, ::1], types.float64[:, ::1])
 
 
 @njit(DYNAMICS_SIGNATURE, cache=True)
@@ -195,8 +193,9 @@ def _fill_ghosts(arr, start, na, nb, sign_a, sign_b):
     first = start + 3 * W
     last = start + (2 + na) * W
     for m in range(1, 4):
-        _ghost(arr[first : first + W], arr[first + W : first + 2 * W], m, sign_a,
-               arr[first - m * W : first - (m - 1) * W])  # fmt: skip
+        _ghost(
+            arr[first : first + W], arr[first + W : first + 2 * W], m, sign_a, arr[first - m * W : first - (m - 1) * W]
+        )
         _ghost(arr[last : last + W], arr[last - W : last], m, sign_a, arr[last + m * W : last + (m + 1) * W])
 
 
@@ -210,8 +209,9 @@ def fill_ghosts(arr, shape, edge_sign):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _affine_plane(idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
-                  x, f0, G, K, p, cu, cd, umax, dmax, dv):  # fmt: skip
+def _affine_plane(
+    idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b, x, f0, G, K, p, cu, cd, umax, dmax, dv
+):
     """Lax-Friedrichs Hamiltonian of control-affine dynamics over a plane."""
     ndim = lo.shape[0]
     ka, kb = ndim - 2, ndim - 1
@@ -245,8 +245,9 @@ def _affine_plane(idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _simple_motion_plane(idx, na, nb, pl, pr, half, axis_player, player_sign, speed, speed_offset, speed_stride,
-                         spd, norm, dv):  # fmt: skip
+def _simple_motion_plane(
+    idx, na, nb, pl, pr, half, axis_player, player_sign, speed, speed_offset, speed_stride, spd, norm, dv
+):
     """Lax-Friedrichs Hamiltonian ``sum_q sign_q v_q |p_q|`` over a plane,
     with each axis's dissipation coefficient the local speed of its player."""
     ndim = axis_player.shape[0]
@@ -290,10 +291,14 @@ def _stencil(v, base, n, k, idx, shape, w, sign, ghosts):
     if k >= ndim - 2:
         st = nb + 6 if k == ndim - 2 else 1
         return (
-            v[base - 3 * st : base - 3 * st + n], v[base - 2 * st : base - 2 * st + n],
-            v[base - st : base - st + n], v[base : base + n], v[base + st : base + st + n],
-            v[base + 2 * st : base + 2 * st + n], v[base + 3 * st : base + 3 * st + n],
-        )  # fmt: skip
+            v[base - 3 * st : base - 3 * st + n],
+            v[base - 2 * st : base - 2 * st + n],
+            v[base - st : base - st + n],
+            v[base : base + n],
+            v[base + st : base + st + n],
+            v[base + 2 * st : base + 2 * st + n],
+            v[base + 3 * st : base + 3 * st + n],
+        )
     st = (na + 6) * (nb + 6)
     for j in range(k + 1, ndim - 2):
         st *= shape[j]
@@ -311,11 +316,44 @@ def _stencil(v, base, n, k, idx, shape, w, sign, ghosts):
 
 @njit(cache=True, nogil=True, fastmath=_FASTMATH, error_model="numpy")
 def stage(
-    first, stop, v, u0, out, a, b, dt, final, monotone, target, avoid, has_avoid, shape, inv_dx, order, consts,
-    edge_sign, kind, axis_player, player_sign, speed, speed_offset, speed_stride,
-    lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
-    record, t_old, tstar, tgrad,
-):  # fmt: skip
+    first,
+    stop,
+    v,
+    u0,
+    out,
+    a,
+    b,
+    dt,
+    final,
+    monotone,
+    target,
+    avoid,
+    has_avoid,
+    shape,
+    inv_dx,
+    order,
+    consts,
+    edge_sign,
+    kind,
+    axis_player,
+    player_sign,
+    speed,
+    speed_offset,
+    speed_stride,
+    lo,
+    dx,
+    dyn,
+    u_kind,
+    u_a,
+    u_b,
+    d_kind,
+    d_a,
+    d_b,
+    record,
+    t_old,
+    tstar,
+    tgrad,
+):
     """One Runge-Kutta stage in Shu-Osher form on planes ``first`` to
     ``stop - 1`` of padded arrays: ``out = a u0 + b (v + dt L(v))`` with
     ``L`` the Lax-Friedrichs numerical Hamiltonian of backward time, ghosts
@@ -351,11 +389,49 @@ def stage(
             r0, r1, r2, r3, r4, r5, r6 = _stencil(v, base, n, k, idx, shape, w, edge_sign[k], ghosts)
             _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx[k], order, consts, pl[k], pr[k])
         if kind == SIMPLE_MOTION:
-            _simple_motion_plane(idx, na, nb, pl, pr, consts[14], axis_player, player_sign, speed,
-                                 speed_offset, speed_stride, spd, norm, dv)  # fmt: skip
+            _simple_motion_plane(
+                idx,
+                na,
+                nb,
+                pl,
+                pr,
+                consts[14],
+                axis_player,
+                player_sign,
+                speed,
+                speed_offset,
+                speed_stride,
+                spd,
+                norm,
+                dv,
+            )
         else:
-            _affine_plane(idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b,
-                          x, f0, G, K, p, cu, cd, umax, dmax, dv)  # fmt: skip
+            _affine_plane(
+                idx,
+                na,
+                nb,
+                lo,
+                dx,
+                pl,
+                pr,
+                dyn,
+                u_kind,
+                u_a,
+                u_b,
+                d_kind,
+                d_a,
+                d_b,
+                x,
+                f0,
+                G,
+                K,
+                p,
+                cu,
+                cd,
+                umax,
+                dmax,
+                dv,
+            )
         centre = v[base : base + n]
         o_run = out[base : base + n]
         u_run = u0[base : base + n]

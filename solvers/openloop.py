@@ -21,9 +21,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from solvers import fmm
-from solvers.errors import InputError
-from solvers.grid import Grid
+from bearcat.solvers import fmm
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
 
 __all__ = ["Defender", "OpenLoopPath", "OpenLoopSolution", "StageSolution", "solve_openloop"]
 
@@ -177,9 +177,7 @@ def _stage(grid: Grid, phi: np.ndarray, target: np.ndarray) -> StageSolution:
     goal = None
     if math.isfinite(value):
         goal = tuple(float(c) for c in grid.point(np.unravel_index(nodes[best], grid.shape)))
-    return StageSolution(
-        phi=phi, safe=safe, value=value, safe_area=float(safe.sum()) * grid.cell_area, goal=goal
-    )
+    return StageSolution(phi=phi, safe=safe, value=value, safe_area=float(safe.sum()) * grid.cell_area, goal=goal)
 
 
 def _empty_stage(grid: Grid) -> StageSolution:
@@ -239,8 +237,7 @@ def _check_point(grid: Grid, point, name: str) -> np.ndarray:
     if not grid.contains(p):
         lo, hi = grid.lo, grid.hi
         raise InputError(
-            f"{name} at ({p[0]:g}, {p[1]:g}) lies outside the grid "
-            f"[{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]"
+            f"{name} at ({p[0]:g}, {p[1]:g}) lies outside the grid [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]"
         )
     return p
 

@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from solvers.errors import InputError
+from bearcat.solvers.errors import InputError
 
 __all__ = [
     "AreaGradient",

@@ -80,15 +80,15 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from solvers import fmm
-from solvers.errors import InputError, non_negative, positive
-from solvers.grid import Grid
+from bearcat.solvers import fmm
+from bearcat.solvers.errors import InputError, non_negative, positive
+from bearcat.solvers.grid import Grid
 
 __all__ = [
     "AreaGradient",
     "FarthestPointEvader",
-    "FmmArena",
     "FmmAreaPursuit",
+    "FmmArena",
     "GeodesicPursuit",
     "SafeSet",
     "safe_set",
@@ -150,7 +150,7 @@ class AreaGradient:
 class _Front:
     """A front leaving ``point`` at speed factor 1, and what is derived from it."""
 
-    __slots__ = ("point", "psi", "source_speed", "capture", "rays", "rays_limit")
+    __slots__ = ("capture", "point", "psi", "rays", "rays_limit", "source_speed")
 
     def __init__(self, point: np.ndarray, psi: np.ndarray, source_speed: float):
         self.point = point
@@ -270,8 +270,7 @@ class FmmArena:
         if not self.grid.contains(p):
             lo, hi = self.grid.lo, self.grid.hi
             raise InputError(
-                f"{name} at ({p[0]:g}, {p[1]:g}) lies outside the grid "
-                f"[{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]"
+                f"{name} at ({p[0]:g}, {p[1]:g}) lies outside the grid [{lo[0]:g}, {hi[0]:g}] x [{lo[1]:g}, {hi[1]:g}]"
             )
         (lx, ly), (hx, hy) = self._lo, self._h
         if _seed_node(self.free, lx, ly, hx, hy, p[0], p[1]) < 0:
@@ -384,7 +383,9 @@ def safe_set(
     e = arena._point(evader, "evader")
     ps = arena._points(pursuers, "pursuers")
     speeds = _speeds(pursuer_speeds, len(ps))
-    return _safe_set(arena, e, ps, positive(evader_speed, "evader speed"), speeds, non_negative(capture_radius, "capture radius"))
+    return _safe_set(
+        arena, e, ps, positive(evader_speed, "evader speed"), speeds, non_negative(capture_radius, "capture radius")
+    )
 
 
 def _safe_set(arena: FmmArena, e, ps, ve: float, speeds, radius: float, remember: bool = True) -> SafeSet:
@@ -591,10 +592,25 @@ class _Boundary:
         self.xa = _capture_points(self.front.psi, a, widths)
         self.xb = _capture_points(self.front.psi, b, widths)
         self._args = (
-            a, b, self.xa, self.xb, self.front.psi, safe.pursuer_times[k], safe.evader_time, arena.speed,
-            p[0] - lx, p[1] - ly, self.front.source_speed, self.speed,
-            e[0] - lx, e[1] - ly, arena._seed_speed(e), float(ve), hx, hy,
-        )  # fmt: skip
+            a,
+            b,
+            self.xa,
+            self.xb,
+            self.front.psi,
+            safe.pursuer_times[k],
+            safe.evader_time,
+            arena.speed,
+            p[0] - lx,
+            p[1] - ly,
+            self.front.source_speed,
+            self.speed,
+            e[0] - lx,
+            e[1] - ly,
+            arena._seed_speed(e),
+            float(ve),
+            hx,
+            hy,
+        )
         self.length, self.weight, self.e, self.missing = _edge_terms(*self._args, _NO_RAYS)
 
     def gradient(self) -> np.ndarray:

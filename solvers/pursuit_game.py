@@ -15,12 +15,13 @@ along whichever axis is still free, or is not made.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable, Protocol
+from typing import Protocol
 
 import numpy as np
 
-from solvers.errors import InputError
+from bearcat.solvers.errors import InputError
 
 __all__ = ["Chase", "EvaderPolicy", "PursuitStrategy", "first_contact", "pursue"]
 
@@ -111,7 +112,9 @@ def pursue(
         if headings.shape != p.shape:
             raise InputError(f"the pursuit strategy returned headings of shape {headings.shape} for {len(p)} pursuers")
         p_next = np.array([_move(q, s * step * _unit(h), passable) for q, s, h in zip(p, speeds, headings)])
-        contacts = [(first_contact(e, e_next, q, q_next, capture_radius), i) for i, (q, q_next) in enumerate(zip(p, p_next))]
+        contacts = [
+            (first_contact(e, e_next, q, q_next, capture_radius), i) for i, (q, q_next) in enumerate(zip(p, p_next))
+        ]
         hits = [(s, i) for s, i in contacts if s is not None]
         if hits:
             s, captor = min(hits)

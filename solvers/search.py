@@ -48,9 +48,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from solvers import fmm
-from solvers.errors import InputError, non_negative, positive
-from solvers.grid import Grid
+from bearcat.solvers import fmm
+from bearcat.solvers.errors import InputError, non_negative, positive
+from bearcat.solvers.grid import Grid
 
 __all__ = [
     "PossibleDefender",
@@ -119,7 +119,7 @@ class PossibleDefender:
         self._keep(seen)
 
     @classmethod
-    def around(cls, terrain, grid: Grid, center, radius: float, *, seen=None) -> "PossibleDefender":
+    def around(cls, terrain, grid: Grid, center, radius: float, *, seen=None) -> PossibleDefender:
         """``P_D^0`` = the disk of ``radius`` metres around the defender's last
         known or prior position, with its edge placed between nodes."""
         pd = cls(terrain, grid, np.zeros(grid.shape, dtype=bool))

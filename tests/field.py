@@ -46,10 +46,15 @@ def scenario_text(
     defender_aided=False,
 ) -> str:
     return SCENARIO.format(
-        name=name, time_limit=time_limit, netem=netem, attacker=list(attacker), defender=list(defender),
-        attacker_behaviour=attacker_behaviour, defender_behaviour=defender_behaviour,
+        name=name,
+        time_limit=time_limit,
+        netem=netem,
+        attacker=list(attacker),
+        defender=list(defender),
+        attacker_behaviour=attacker_behaviour,
+        defender_behaviour=defender_behaviour,
         defender_aided=str(defender_aided).lower(),
-    )  # fmt: skip
+    )
 
 
 def write_scenario(directory, **kw):

@@ -12,12 +12,12 @@ import zenoh
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from bus import keys
-from bus.codec import MAX_PAYLOAD, Inbox, Refused, decode, encode
-from bus.errors import BusError
-from bus.inprocess import InProcessBus
-from bus.messages import Control, Fix, GameState, Guidance, Report, Truth, UavTask
-from bus.zenoh_session import ZenohSession, config
+from bearcat.bus import keys
+from bearcat.bus.codec import MAX_PAYLOAD, Inbox, Refused, decode, encode
+from bearcat.bus.errors import BusError
+from bearcat.bus.inprocess import InProcessBus
+from bearcat.bus.messages import Control, Fix, GameState, Guidance, Report, Truth, UavTask
+from bearcat.bus.zenoh_session import ZenohSession, config
 
 GAME = "g1"
 
@@ -25,9 +25,17 @@ SAMPLES = {
     keys.fix(GAME, "a1"): Fix(agent="a1", seq=3, t=12.5, lat=37.87, lon=-122.26, heading=359.5, accuracy=4.0),
     keys.truth(GAME, "a1"): Truth(agent="a1", t=12.5, lat=37.87, lon=-122.26),
     keys.guidance(GAME, "d1"): Guidance(
-        agent="d1", seq=1, t=12.6, game="ctf", heading=90.0, region=[[(37.0, -122.0), (37.1, -122.0), (37.1, -122.1)]],
-        region_of="a1", go=False, value=3.5, reports=[Report("a1", 12.5, 37.87, -122.26)],
-    ),  # fmt: skip
+        agent="d1",
+        seq=1,
+        t=12.6,
+        game="ctf",
+        heading=90.0,
+        region=[[(37.0, -122.0), (37.1, -122.0), (37.1, -122.1)]],
+        region_of="a1",
+        go=False,
+        value=3.5,
+        reports=[Report("a1", 12.5, 37.87, -122.26)],
+    ),
     keys.state(GAME): GameState(seq=7, t=20.0, phase="ended", winner="defender", reason="capture", captured=["a1"]),
     keys.control(GAME): Control(t=0.0, command="start"),
     keys.uav_task(GAME, "q1"): UavTask(uav="q1", seq=0, t=1.0, kind="search", lat=37.87, lon=-122.26, alt=30.0),
@@ -53,9 +61,13 @@ def test_a_name_that_would_widen_or_break_a_key_is_refused(name):
 @pytest.mark.parametrize("kind", ["fix", "guidance", "truth", "uav-task", "alive", "state"])
 def test_the_wildcard_of_a_kind_matches_its_keys_and_no_other(kind):
     concrete = {
-        "fix": keys.fix(GAME, "a1"), "guidance": keys.guidance(GAME, "a1"), "truth": keys.truth(GAME, "a1"),
-        "uav-task": keys.uav_task(GAME, "q1"), "alive": keys.alive(GAME, "phone", "a1"), "state": keys.state(GAME),
-    }  # fmt: skip
+        "fix": keys.fix(GAME, "a1"),
+        "guidance": keys.guidance(GAME, "a1"),
+        "truth": keys.truth(GAME, "a1"),
+        "uav-task": keys.uav_task(GAME, "q1"),
+        "alive": keys.alive(GAME, "phone", "a1"),
+        "state": keys.state(GAME),
+    }
     wildcard = zenoh.KeyExpr(keys.every(GAME, kind))
     for other, key in concrete.items():
         assert wildcard.includes(zenoh.KeyExpr(key)) == (other == kind)
@@ -88,7 +100,9 @@ def test_any_valid_fix_round_trips_exactly(seq, t, lat, lon, heading):
 
 
 def _raw(**fields) -> bytes:
-    return msgspec.msgpack.encode({"type": "fix", "v": 1, "agent": "a1", "seq": 0, "t": 1.0, "lat": 0.0, "lon": 0.0} | fields)
+    return msgspec.msgpack.encode(
+        {"type": "fix", "v": 1, "agent": "a1", "seq": 0, "t": 1.0, "lat": 0.0, "lon": 0.0} | fields
+    )
 
 
 @pytest.mark.parametrize(

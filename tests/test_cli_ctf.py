@@ -53,8 +53,21 @@ def test_solve_shows_progress_for_a_set_it_solves(tmp_path):
 def test_query_names_the_winner_and_headings_in_json(cache):
     # The attacker next to its return strip, the defender far south: the
     # attacker walks home.
-    run = bearcat("query", "ctf", *GAME, "--stages", "all", "--phase", "return",
-                  "--attacker", "5,8", "--defender", "5,1", "--json", cache=cache)  # fmt: skip
+    run = bearcat(
+        "query",
+        "ctf",
+        *GAME,
+        "--stages",
+        "all",
+        "--phase",
+        "return",
+        "--attacker",
+        "5,8",
+        "--defender",
+        "5,1",
+        "--json",
+        cache=cache,
+    )
     assert run.returncode == 0, run.stderr
     answer = json.loads(run.stdout[run.stdout.index("{") :])
     assert answer["winner"] == "attacker" and answer["value_m"] < 0
@@ -65,8 +78,23 @@ def test_query_names_the_winner_and_headings_in_json(cache):
 
 def test_query_a_blocked_return_is_the_defenders(cache, tmp_path):
     plot = tmp_path / "slice.png"
-    run = bearcat("query", "ctf", *GAME, "--stages", "all", "--phase", "return",
-                  "--attacker", "5,3", "--defender", "5,7.5", "--json", "--plot", str(plot), cache=cache)  # fmt: skip
+    run = bearcat(
+        "query",
+        "ctf",
+        *GAME,
+        "--stages",
+        "all",
+        "--phase",
+        "return",
+        "--attacker",
+        "5,3",
+        "--defender",
+        "5,7.5",
+        "--json",
+        "--plot",
+        str(plot),
+        cache=cache,
+    )
     assert run.returncode == 0, run.stderr
     answer = json.loads(run.stdout[run.stdout.index("{") : run.stdout.rindex("}") + 1])
     assert answer["winner"] == "defender" and answer["value_m"] > 0
@@ -75,8 +103,22 @@ def test_query_a_blocked_return_is_the_defenders(cache, tmp_path):
 
 def test_play_writes_tracks_and_a_figure(cache, tmp_path):
     plot, out = tmp_path / "play.png", tmp_path / "play.json"
-    run = bearcat("play", "ctf", *GAME, "--stages", "all", "--attacker", "5,8", "--defender", "5,1",
-                  "--plot", str(plot), "--json", str(out), cache=cache)  # fmt: skip
+    run = bearcat(
+        "play",
+        "ctf",
+        *GAME,
+        "--stages",
+        "all",
+        "--attacker",
+        "5,8",
+        "--defender",
+        "5,1",
+        "--plot",
+        str(plot),
+        "--json",
+        str(out),
+        cache=cache,
+    )
     assert run.returncode == 0, run.stderr
     game = json.loads(out.read_text())
     assert game["winner"] in ("attacker", "defender")
@@ -90,11 +132,16 @@ def test_play_writes_tracks_and_a_figure(cache, tmp_path):
         (("--map", "nowhere-7", "--attacker", "1,1", "--defender", "2,2"), "nowhere-7"),
         (("--map", "square-10", "--attacker", "1,1", "--defender", "2,2"), "flag region"),
         (("--map", "ctf-10", "--attacker", "11,1", "--defender", "2,2"), "attacker at (11.0, 1.0) is outside the area"),
-        (("--map", "campus-200", "--attacker", "50,150", "--defender", "100,100"), "defender at (100.0, 100.0) is inside"),
+        (
+            ("--map", "campus-200", "--attacker", "50,150", "--defender", "100,100"),
+            "defender at (100.0, 100.0) is inside",
+        ),
         (("--map", "ctf-10", "--grid", "400", "--attacker", "1,1", "--defender", "2,2"), "GB"),
         (("--map", "ctf-10", "--grid", "5", "--attacker", "1,1", "--defender", "2,2"), "--grid 5"),
-        (("--map", "ctf-10", "--grid", "15", "--attacker", "1,1", "--defender", "2,2"),
-         "--grid 15 is too coarse for a capture radius of 0.5 m: its cells on map ctf-10 are 0.71 m; use --grid 21"),
+        (
+            ("--map", "ctf-10", "--grid", "15", "--attacker", "1,1", "--defender", "2,2"),
+            "--grid 15 is too coarse for a capture radius of 0.5 m: its cells on map ctf-10 are 0.71 m; use --grid 21",
+        ),
     ],
 )
 def test_bad_input_is_one_sentence_naming_the_culprit(words, culprit, tmp_path):

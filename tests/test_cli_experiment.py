@@ -10,17 +10,34 @@ import time
 
 import pytest
 
-from scenarios.pursuit_experiment import PursuitSetup, run_trial, trial_tasks
+from bearcat.scenarios.pursuit_experiment import PursuitSetup, run_trial, trial_tasks
 
 
 def bearcat(*words, cwd=None):
-    return subprocess.run([sys.executable, "-m", "bearcat", *words], capture_output=True, text=True, timeout=600, cwd=cwd)
+    return subprocess.run(
+        [sys.executable, "-m", "bearcat", *words], capture_output=True, text=True, timeout=600, cwd=cwd
+    )
 
 
 def test_a_small_convex_table_with_histograms_and_one_line_per_trial(tmp_path):
     out = tmp_path / "run"
-    run = bearcat("experiment", "pursuit", "--domain", "square-10", "--pursuers", "1", "2", "--trials", "12",
-                  "--seed", "7", "--workers", "2", "--out", str(out))  # fmt: skip
+    run = bearcat(
+        "experiment",
+        "pursuit",
+        "--domain",
+        "square-10",
+        "--pursuers",
+        "1",
+        "2",
+        "--trials",
+        "12",
+        "--seed",
+        "7",
+        "--workers",
+        "2",
+        "--out",
+        str(out),
+    )
     assert run.returncode == 0, run.stderr
     lines = [json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()]
     assert sorted(r["key"] for r in lines) == sorted(f"square-10/{n}/{i}" for n in (1, 2) for i in range(12))
@@ -38,8 +55,23 @@ def test_a_small_convex_table_with_histograms_and_one_line_per_trial(tmp_path):
 
 def test_a_trial_gives_the_same_result_alone_as_in_the_batch(tmp_path):
     out = tmp_path / "run"
-    assert bearcat("experiment", "pursuit", "--domain", "square-10", "--pursuers", "2", "--trials", "4",
-                   "--seed", "3", "--out", str(out)).returncode == 0  # fmt: skip
+    assert (
+        bearcat(
+            "experiment",
+            "pursuit",
+            "--domain",
+            "square-10",
+            "--pursuers",
+            "2",
+            "--trials",
+            "4",
+            "--seed",
+            "3",
+            "--out",
+            str(out),
+        ).returncode
+        == 0
+    )
     batch = {json.loads(line)["key"]: json.loads(line) for line in (out / "trials.jsonl").read_text().splitlines()}
     task = trial_tasks(["square-10"], [2], 4, 3, PursuitSetup())[2]
     assert run_trial(task) == batch[task["key"]]
@@ -47,10 +79,28 @@ def test_a_trial_gives_the_same_result_alone_as_in_the_batch(tmp_path):
 
 def test_an_interrupted_run_resumes_without_redoing_trials(tmp_path):
     out = tmp_path / "run"
-    words = ("experiment", "pursuit", "--domain", "square-10", "--pursuers", "1", "2", "3", "--trials", "200",
-             "--workers", "2", "--out", str(out))  # fmt: skip
-    child = subprocess.Popen([sys.executable, "-m", "bearcat", *words], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                             start_new_session=True)  # fmt: skip
+    words = (
+        "experiment",
+        "pursuit",
+        "--domain",
+        "square-10",
+        "--pursuers",
+        "1",
+        "2",
+        "3",
+        "--trials",
+        "200",
+        "--workers",
+        "2",
+        "--out",
+        str(out),
+    )
+    child = subprocess.Popen(
+        [sys.executable, "-m", "bearcat", *words],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        start_new_session=True,
+    )
     trials = out / "trials.jsonl"
     deadline = time.monotonic() + 120
     while time.monotonic() < deadline and (not trials.exists() or len(trials.read_text().splitlines()) < 20):
@@ -69,10 +119,26 @@ def test_an_interrupted_run_resumes_without_redoing_trials(tmp_path):
 
 def test_a_run_directory_of_another_setup_and_unknown_domains_are_refused(tmp_path):
     out = tmp_path / "run"
-    assert bearcat("experiment", "pursuit", "--domain", "square-10", "--pursuers", "1", "--trials", "2",
-                   "--out", str(out)).returncode == 0  # fmt: skip
-    other = bearcat("experiment", "pursuit", "--domain", "square-10", "--pursuers", "1", "--trials", "2",
-                    "--dt", "0.05", "--out", str(out))  # fmt: skip
+    assert (
+        bearcat(
+            "experiment", "pursuit", "--domain", "square-10", "--pursuers", "1", "--trials", "2", "--out", str(out)
+        ).returncode
+        == 0
+    )
+    other = bearcat(
+        "experiment",
+        "pursuit",
+        "--domain",
+        "square-10",
+        "--pursuers",
+        "1",
+        "--trials",
+        "2",
+        "--dt",
+        "0.05",
+        "--out",
+        str(out),
+    )
     assert other.returncode == 2 and "another setup (dt 0.1 -> 0.05)" in other.stderr
     unknown = bearcat("experiment", "pursuit", "--domain", "moon-3", "--out", str(out))
     assert unknown.returncode == 2 and "unknown domain 'moon-3'" in unknown.stderr

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import shapely
 
-from maps import load_map
+from bearcat.maps import load_map
 
 
 def bearcat(*words: str, cwd=None) -> subprocess.CompletedProcess:
@@ -25,8 +25,19 @@ CAMPUS = ("solve", "openloop", "--map", "campus-400", "--target", "flag", "home"
 def test_two_stage_campus_solve_writes_a_safe_path_json_and_plot(tmp_path):
     out_json, out_png = tmp_path / "result.json", tmp_path / "result.png"
     run = bearcat(
-        *CAMPUS, "--attacker", "370,30", "--defender", "120,150", "--defender", "330,200,0.5",
-        "--capture-radius", "2", "--json", str(out_json), "--plot", str(out_png),
+        *CAMPUS,
+        "--attacker",
+        "370,30",
+        "--defender",
+        "120,150",
+        "--defender",
+        "330,200,0.5",
+        "--capture-radius",
+        "2",
+        "--json",
+        str(out_json),
+        "--plot",
+        str(out_png),
     )
     assert run.returncode == 0, run.stderr
     assert "safe path found" in run.stdout
@@ -49,8 +60,20 @@ def test_two_stage_campus_solve_writes_a_safe_path_json_and_plot(tmp_path):
 def test_a_defender_on_the_target_leaves_no_safe_path(tmp_path):
     out_json = tmp_path / "result.json"
     run = bearcat(
-        "solve", "openloop", "--map", "square-10", "--attacker", "1,1", "--defender", "8,8",
-        "--target", "8.5,8.5,0.5", "--capture-radius", "0.5", "--json", str(out_json),
+        "solve",
+        "openloop",
+        "--map",
+        "square-10",
+        "--attacker",
+        "1,1",
+        "--defender",
+        "8,8",
+        "--target",
+        "8.5,8.5,0.5",
+        "--capture-radius",
+        "0.5",
+        "--json",
+        str(out_json),
     )
     assert run.returncode == 0, run.stderr
     assert "no safe path" in run.stdout
@@ -74,8 +97,10 @@ def _inside_an_obstacle(name: str) -> str:
         (("--map", "square-10", "--attacker", "1,1", "--target", "9,9,1", "--stage-speed", "0"), "'0'"),
         (("--map", "square-10", "--attacker", "1,1", "--defender", "5,5,-1", "--target", "9,9,1"), "5,5,-1"),
         (("--map", "square-10", "--attacker", "nan,1", "--target", "9,9,1"), "nan,1"),
-        (("--map", "square-10", "--attacker", "1,1", "--target", "9,9,1", "5,5,1", "--stage-speed", "1", "2", "3"),
-         "--stage-speed"),
+        (
+            ("--map", "square-10", "--attacker", "1,1", "--target", "9,9,1", "5,5,1", "--stage-speed", "1", "2", "3"),
+            "--stage-speed",
+        ),
     ],
 )
 def test_bad_input_is_one_sentence_naming_the_culprit_and_exit_code_2(words, culprit):
@@ -87,14 +112,42 @@ def test_bad_input_is_one_sentence_naming_the_culprit_and_exit_code_2(words, cul
 
 
 def test_a_users_geojson_file_works_wherever_a_built_in_name_does(tmp_path):
-    from maps import write_geojson
+    from bearcat.maps import write_geojson
 
     field = tmp_path / "my-field.geojson"
     write_geojson(load_map("field-50"), field)
-    by_name = bearcat("solve", "openloop", "--map", "field-50", "--attacker", "40,5", "--target", "home",
-                      "--defender", "5,20", "--capture-radius", "1", "--json", "-")
-    by_path = bearcat("solve", "openloop", "--map", str(field), "--attacker", "40,5", "--target", "home",
-                      "--defender", "5,20", "--capture-radius", "1", "--json", "-")
+    by_name = bearcat(
+        "solve",
+        "openloop",
+        "--map",
+        "field-50",
+        "--attacker",
+        "40,5",
+        "--target",
+        "home",
+        "--defender",
+        "5,20",
+        "--capture-radius",
+        "1",
+        "--json",
+        "-",
+    )
+    by_path = bearcat(
+        "solve",
+        "openloop",
+        "--map",
+        str(field),
+        "--attacker",
+        "40,5",
+        "--target",
+        "home",
+        "--defender",
+        "5,20",
+        "--capture-radius",
+        "1",
+        "--json",
+        "-",
+    )
     assert by_name.returncode == by_path.returncode == 0, by_path.stderr
-    value = [json.loads(run.stdout[run.stdout.index("{"):])["value_s"] for run in (by_name, by_path)]
+    value = [json.loads(run.stdout[run.stdout.index("{") :])["value_s"] for run in (by_name, by_path)]
     assert value[0] is not None and value[0] == pytest.approx(value[1], abs=1e-3)

@@ -14,13 +14,13 @@ import pytest
 import shapely
 from scipy import ndimage
 
-from agents.ground_station.ctf_arena import ctf_arena
-from agents.ground_station.ctf_cache import CtfGame, load_or_solve
-from maps import MapError, load_map
-from solvers.ctf import CtfSolution, Rules, required_game_bytes, solve_ctf
-from solvers.ctf_guidance import Guidance, interpolate_2d
-from solvers.ctf_playout import play
-from solvers.errors import InputError
+from bearcat.agents.ground_station.ctf_arena import ctf_arena
+from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve
+from bearcat.maps import MapError, load_map
+from bearcat.solvers.ctf import CtfSolution, Rules, required_game_bytes, solve_ctf
+from bearcat.solvers.ctf_guidance import Guidance, interpolate_2d
+from bearcat.solvers.ctf_playout import play
+from bearcat.solvers.errors import InputError
 
 N = 21  # nodes per axis of the ctf-10 games: 0.5 m cells
 RULES = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.8, capture_time=12.0, return_time=12.0)
@@ -66,7 +66,7 @@ def node_states(arena, mask, count, seed=0):
     rng = np.random.default_rng(seed)
     x, y = arena.grid.axes()
     picked = nodes[rng.choice(len(nodes), min(count, len(nodes)), replace=False)]
-    return [((x[i], y[j]), (x[k], y[l]), (i, j, k, l)) for i, j, k, l in picked]
+    return [((x[i], y[j]), (x[k], y[m]), (i, j, k, m)) for i, j, k, m in picked]
 
 
 def flag_centre(game_map):
@@ -344,9 +344,9 @@ def test_headings_are_unit_vectors(first_game, weno_game):
 def test_states_off_the_grid_are_refused_naming_the_player(first_game):
     (xmin, ymin), (xmax, ymax) = first_game.arena.grid.lo, first_game.arena.grid.hi
     mid = ((xmin + xmax) / 2, (ymin + ymax) / 2)
-    with pytest.raises(InputError, match="attacker .* off the game's grid"):
+    with pytest.raises(InputError, match=r"attacker .* off the game's grid"):
         first_game.evaluate((xmin - 0.5, mid[1]), mid)
-    with pytest.raises(InputError, match="defender .* off the game's grid"):
+    with pytest.raises(InputError, match=r"defender .* off the game's grid"):
         first_game.evaluate(mid, (mid[0], ymax + 0.5))
     with pytest.raises(InputError, match="defender"):
         first_game.evaluate(mid, (float("nan"), mid[1]))
@@ -363,9 +363,9 @@ def test_states_inside_a_building_are_refused_naming_the_player(campus):
     free = home.geometry.representative_point().coords[0]
     assert not guidance.arena.free[guidance.arena.grid.nearest_index(building)]
     guidance.evaluate(free, (free[0] + 20.0, free[1]), "return")  # a free state is answered
-    with pytest.raises(InputError, match="attacker .* inside an obstacle"):
+    with pytest.raises(InputError, match=r"attacker .* inside an obstacle"):
         guidance.evaluate(building, free, "return")
-    with pytest.raises(InputError, match="defender .* inside an obstacle"):
+    with pytest.raises(InputError, match=r"defender .* inside an obstacle"):
         guidance.evaluate(free, building, "return")
     with pytest.raises(InputError, match="defender"):
         guidance.attacker_region(building, "return")
@@ -461,9 +461,14 @@ def test_too_few_or_fractional_grid_points_are_refused(grid_points):
 
 @pytest.mark.parametrize(
     "field, value",
-    [("attacker_speed", -1.0), ("defender_speed", 0.0), ("capture_time", float("inf")),
-     ("return_time", float("nan")), ("capture_radius", -0.1)],
-)  # fmt: skip
+    [
+        ("attacker_speed", -1.0),
+        ("defender_speed", 0.0),
+        ("capture_time", float("inf")),
+        ("return_time", float("nan")),
+        ("capture_radius", -0.1),
+    ],
+)
 def test_bad_rules_are_refused_naming_the_rule(field, value):
     with pytest.raises(InputError, match=field.replace("_", " ")):
         Rules(**{field: value})

@@ -7,9 +7,9 @@ import numpy as np
 from scipy import ndimage
 from scipy.interpolate import RegularGridInterpolator
 
-from agents.ground_station.ctf_arena import ctf_arena
-from maps import load_map
-from solvers.ctf import Rules, solve_ctf
+from bearcat.agents.ground_station.ctf_arena import ctf_arena
+from bearcat.maps import load_map
+from bearcat.solvers.ctf import Rules, solve_ctf
 
 RULES = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.5, capture_time=6.0, return_time=6.0)
 

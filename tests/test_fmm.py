@@ -8,9 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-from solvers.errors import InputError
-from solvers.fmm import descend, point_source, time_to_capture, travel_time
-from solvers.grid import Grid
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.fmm import descend, point_source, time_to_capture, travel_time
+from bearcat.solvers.grid import Grid
 
 
 def square(n, side=10.0):
@@ -130,7 +130,7 @@ def test_enclosed_region_is_never_reached():
     g = square(41)
     x, y = g.mesh()
     v = np.ones(g.shape)
-    ring = (np.abs(np.hypot(x - 7, y - 7) - 2) < 0.4)
+    ring = np.abs(np.hypot(x - 7, y - 7) - 2) < 0.4
     v[ring] = 0
     phi = travel_time(v, g.spacing, point_source(g, (2.0, 2.0), v))
     assert np.all(np.isinf(phi[np.hypot(x - 7, y - 7) < 1.5]))
@@ -165,7 +165,7 @@ def test_seeds_join_the_band_and_can_be_improved():
 
 def test_ceiling_stops_the_front():
     g = square(41)
-    x, y = g.mesh()
+    x, _y = g.mesh()
     v = np.ones(g.shape)
     src = (2.0, 5.0)
     plain = travel_time(v, g.spacing, point_source(g, src, v))
@@ -195,7 +195,7 @@ def test_capture_disk_reaches_across_a_thin_wall():
     """The capture set is a Euclidean disk: a defender next to a wall captures
     through it, which ``psi - r / v`` would miss (psi is infinite in the wall)."""
     g = square(51)
-    x, y = g.mesh()
+    x, _y = g.mesh()
     v = np.ones(g.shape)
     v[(np.abs(x - 5.0) < 0.1)] = 0
     psi = travel_time(v, g.spacing, point_source(g, (4.4, 5.0), v))
@@ -315,7 +315,7 @@ def test_descend_goes_around_a_wall_without_entering_it():
 
 def test_descend_stops_at_seeds():
     g = square(41)
-    x, y = g.mesh()
+    x, _y = g.mesh()
     v = np.ones(g.shape)
     seeds = x <= 1.0
     phi = travel_time(v, g.spacing, np.where(seeds, 0.0, np.inf))

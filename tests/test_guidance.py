@@ -5,9 +5,9 @@ boundaries, and positions a fix put inside a building moved out first."""
 import numpy as np
 import pytest
 
-from agents.ground_station.guidance import GuidanceService, ReachAvoidAdvisor, _Fixes
-from bus.messages import Fix
-from maps import load_map
+from bearcat.agents.ground_station.guidance import GuidanceService, ReachAvoidAdvisor, _Fixes
+from bearcat.bus.messages import Fix
+from bearcat.maps import load_map
 
 
 def fixes_at(game_map, positions):
@@ -21,9 +21,14 @@ def fixes_at(game_map, positions):
 def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
     campus = load_map("campus-400")
     advisor = ReachAvoidAdvisor(
-        campus, attacker="a", defenders=["d1", "d2"], targets=["flag", "home"],
-        speeds={"a": 5.0, "d1": 1.0, "d2": 0.5}, capture_radius=2.0, spacing=2.0,
-    )  # fmt: skip
+        campus,
+        attacker="a",
+        defenders=["d1", "d2"],
+        targets=["flag", "home"],
+        speeds={"a": 5.0, "d1": 1.0, "d2": 0.5},
+        capture_radius=2.0,
+        spacing=2.0,
+    )
     fixes = fixes_at(campus, {"a": (370.0, 30.0), "d1": (120.0, 150.0), "d2": (330.0, 200.0)})
     shown = advisor("a", fixes, 2.0)
     assert shown["go"] is True and 0 <= shown["heading"] < 360
@@ -37,9 +42,14 @@ def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
     assert shown["region"] and shown["value"] > 0
     # Defenders fast enough to cut every path: no go, no heading.
     fast = ReachAvoidAdvisor(
-        campus, attacker="a", defenders=["d1", "d2"], targets=["flag", "home"],
-        speeds={"a": 5.0, "d1": 10.0, "d2": 10.0}, capture_radius=2.0, spacing=2.0,
-    )  # fmt: skip
+        campus,
+        attacker="a",
+        defenders=["d1", "d2"],
+        targets=["flag", "home"],
+        speeds={"a": 5.0, "d1": 10.0, "d2": 10.0},
+        capture_radius=2.0,
+        spacing=2.0,
+    )
     blocked = fast("a", fixes, 2.0)
     assert blocked["go"] is False and "heading" not in blocked
 
@@ -47,9 +57,14 @@ def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
 def test_a_fix_inside_a_building_is_answered_from_the_nearest_free_point():
     campus = load_map("campus-400")
     advisor = ReachAvoidAdvisor(
-        campus, attacker="a", defenders=["d1"], targets=["flag", "home"], speeds={"a": 5.0, "d1": 1.0},
-        capture_radius=2.0, spacing=2.0,
-    )  # fmt: skip
+        campus,
+        attacker="a",
+        defenders=["d1"],
+        targets=["flag", "home"],
+        speeds={"a": 5.0, "d1": 1.0},
+        capture_radius=2.0,
+        spacing=2.0,
+    )
     inside = np.asarray(campus.obstacles[0].representative_point().coords[0])
     shown = advisor("a", fixes_at(campus, {"a": (370.0, 30.0), "d1": tuple(inside)}), 2.0)
     assert "note" not in shown and shown["go"] in (True, False)

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from solvers.errors import InputError
-from solvers.grid import Grid
-from solvers.hamiltonians import Box, Ball, ControlAffine, Player, SimpleMotion
-from solvers.hji import PaddedField, required_bytes, solve_reach_avoid
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
+from bearcat.solvers.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
+from bearcat.solvers.hji import PaddedField, required_bytes, solve_reach_avoid
 
 SCHEMES = ("first", "weno5")
 # Half-width, in cells, of the band around a set boundary where the schemes
@@ -52,9 +52,13 @@ def line_game(stage, scheme, defender_speed=1.0, capture_radius=CAPTURE, n=121):
     forfeit = np.minimum(interval_distance(xd, *FLAG), xd - HOME)  # the defender in F or R
     goal = interval_distance(xa, *FLAG) if stage == "capture" else xa - HOME
     result = solve_reach_avoid(
-        g, SimpleMotion.pursuit(1.0, defender_speed, dims=1), np.minimum(goal, forfeit),
-        np.abs(xa - xd) - capture_radius, horizon=15.0, scheme=scheme,
-    )  # fmt: skip
+        g,
+        SimpleMotion.pursuit(1.0, defender_speed, dims=1),
+        np.minimum(goal, forfeit),
+        np.abs(xa - xd) - capture_radius,
+        horizon=15.0,
+        scheme=scheme,
+    )
     return result.reach_avoid_set, xa, xd
 
 
@@ -70,7 +74,7 @@ def line_game_by_inspection(stage, xa, xd):
         blocked = ((xa < FLAG[0]) & (xa < xd) & (xd < FLAG[0])) | ((xa > FLAG[1]) & (FLAG[1] < xd) & (xd < xa))
     else:
         arrived = xa <= HOME
-        blocked = (HOME < xd) & (xd < xa)
+        blocked = (xd > HOME) & (xd < xa)
     return free & (arrived | forfeited | ~blocked)
 
 
@@ -129,9 +133,11 @@ def _margin(ax, ay, dx, dy, samples):
         for _ in range(40):
             m1, m2 = lo + 0.382 * (hi - lo), lo + 0.618 * (hi - lo)
             f1 = math.hypot(x0 + m1 * (x1 - x0) - ax, y0 + m1 * (y1 - y0) - ay) - math.hypot(
-                x0 + m1 * (x1 - x0) - dx, y0 + m1 * (y1 - y0) - dy)
+                x0 + m1 * (x1 - x0) - dx, y0 + m1 * (y1 - y0) - dy
+            )
             f2 = math.hypot(x0 + m2 * (x1 - x0) - ax, y0 + m2 * (y1 - y0) - ay) - math.hypot(
-                x0 + m2 * (x1 - x0) - dx, y0 + m2 * (y1 - y0) - dy)
+                x0 + m2 * (x1 - x0) - dx, y0 + m2 * (y1 - y0) - dy
+            )
             if f1 < f2:
                 hi = m2
             else:
@@ -202,6 +208,7 @@ def test_first_order_loses_a_one_cell_capture_radius_that_weno5_keeps():
 
 # --- one player, sets in closed form ---
 
+
 def plane(n=101, side=5.0):
     return Grid.spanning((-side, -side), (side, side), (n, n))
 
@@ -256,6 +263,7 @@ def test_weno5_places_a_cornered_front_closer_than_first_order():
 
 # --- control-affine dynamics ---
 
+
 @numba.njit(cache=True)
 def rotating(x, f0, G, K):
     f0[0] = -x[1]
@@ -281,9 +289,13 @@ def test_control_affine_rotation_with_a_ball_of_controls(scheme):
     g = plane()
     x, y = g.mesh()
     found = solve_reach_avoid(
-        g, ControlAffine(rotating, control=Ball((0.0, 0.0), 1.0)), np.hypot(x - 2, y) - 0.5,
-        horizon=1.5, scheme=scheme, tol=0,
-    ).reach_avoid_set  # fmt: skip
+        g,
+        ControlAffine(rotating, control=Ball((0.0, 0.0), 1.0)),
+        np.hypot(x - 2, y) - 0.5,
+        horizon=1.5,
+        scheme=scheme,
+        tol=0,
+    ).reach_avoid_set
     t = np.linspace(0, 1.5, 601)[:, None, None]
     # 1-Lipschitz, <= 0 exactly on the set: how far a node is inside or out.
     margin = (np.hypot(x - 2 * np.cos(t), y + 2 * np.sin(t)) - 0.5 - t).min(axis=0)
@@ -313,11 +325,13 @@ def test_dynamics_that_leave_entries_unset_are_refused():
     g = plane(11)
     x, _ = g.mesh()
     with pytest.raises(InputError, match="K"):
-        solve_reach_avoid(g, ControlAffine(rotating, control=Ball((0.0, 0.0), 1.0),
-                                           disturbance=Ball((0.0, 0.0), 0.5)), x, horizon=1.0)  # fmt: skip
+        solve_reach_avoid(
+            g, ControlAffine(rotating, control=Ball((0.0, 0.0), 1.0), disturbance=Ball((0.0, 0.0), 0.5)), x, horizon=1.0
+        )
 
 
 # --- convergence, T*, progress ---
+
 
 def test_convergence_stops_a_settled_problem_and_a_short_horizon_is_not_converged():
     g = plane()
@@ -350,6 +364,7 @@ def test_tstar_records_when_and_with_which_gradient_the_front_passed():
 
 
 # --- bad input ---
+
 
 def test_a_grid_too_large_for_memory_is_refused_before_allocating():
     g = Grid.spanning((0.0,) * 4, (1.0,) * 4, (200,) * 4)
@@ -394,8 +409,9 @@ def test_padded_fields_solve_exactly_like_plain_arrays_and_tstar_can_skip_the_gr
         field = PaddedField(g)
         field.nodes[...] = array
         fields.append(field)
-    padded = solve_reach_avoid(g, SimpleMotion.pursuit(1.0, 1.0), *fields, horizon=3.0, record_tstar=True,
-                               record_gradient=False)  # fmt: skip
+    padded = solve_reach_avoid(
+        g, SimpleMotion.pursuit(1.0, 1.0), *fields, horizon=3.0, record_tstar=True, record_gradient=False
+    )
     assert np.array_equal(plain.value, padded.value) and np.array_equal(plain.tstar, padded.tstar)
     assert padded.tstar_gradient is None and plain.tstar_gradient is not None
     with pytest.raises(InputError, match="PaddedField"):

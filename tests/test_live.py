@@ -12,13 +12,14 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
-
-from agents.ground_station.recorder import read_events
-from bus import keys
-from bus.zenoh_session import ZenohSession, config
 from field import write_scenario
+
+from bearcat.agents.ground_station.recorder import read_events
+from bearcat.bus import keys
+from bearcat.bus.zenoh_session import ZenohSession, config
 
 
 @pytest.fixture
@@ -31,8 +32,11 @@ def start_run(tmp_path, env, **kw):
     out = tmp_path / "run"
     launcher = subprocess.Popen(
         [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
-        env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
-    )  # fmt: skip
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     return launcher, out, path
 
 
@@ -71,13 +75,20 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path, env):
 
 def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path, env):
     launcher, out, path = start_run(
-        tmp_path, env, time_limit=60.0, attacker_behaviour="follow-guidance",
-        defender_behaviour="follow-guidance", defender_aided=True, netem="ideal",
-    )  # fmt: skip
+        tmp_path,
+        env,
+        time_limit=60.0,
+        attacker_behaviour="follow-guidance",
+        defender_behaviour="follow-guidance",
+        defender_aided=True,
+        netem="ideal",
+    )
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         time.sleep(1.0)
-        (victim,) = [p for p in peers_of(path) if "--id defender" in open(f"/proc/{p}/cmdline").read().replace("\0", " ")]
+        (victim,) = [
+            p for p in peers_of(path) if "--id defender" in Path(f"/proc/{p}/cmdline").read_text().replace("\0", " ")
+        ]
         killed = time.time()
         os.kill(victim, signal.SIGKILL)
         output, _ = launcher.communicate(timeout=60)
@@ -92,7 +103,7 @@ def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(t
 
 
 def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_path, env):
-    launcher, out, path = start_run(tmp_path, env, time_limit=8.0, netem="ideal")
+    launcher, out, _path = start_run(tmp_path, env, time_limit=8.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         port = json.loads((out / "endpoint.json").read_text())["endpoint"]
@@ -100,10 +111,15 @@ def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_pa
         rng = random.Random(0)
         game = "test-game"
         targets = [
-            keys.fix(game, "attacker"), keys.fix(game, "defender"), keys.guidance(game, "attacker"),
-            keys.guidance(game, "defender"), keys.state(game), keys.control(game), keys.truth(game, "attacker"),
+            keys.fix(game, "attacker"),
+            keys.fix(game, "defender"),
+            keys.guidance(game, "attacker"),
+            keys.guidance(game, "defender"),
+            keys.state(game),
+            keys.control(game),
+            keys.truth(game, "attacker"),
             keys.uav_task(game, "q1"),
-        ]  # fmt: skip
+        ]
         time.sleep(0.5)
         for k in range(400):
             payload = bytes(rng.randrange(256) for _ in range(rng.randrange(0, 64)))
@@ -136,9 +152,9 @@ def test_ctrl_c_stops_every_peer(tmp_path, env):
 
 
 def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path, env):
-    from scenarios.live import fetch_scenario
+    from bearcat.scenarios.live import fetch_scenario
 
-    launcher, out, path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+    launcher, out, _path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
@@ -158,10 +174,16 @@ def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):
     north, space: stop), as a person's would."""
     import pty
 
-    launcher, out, path = start_run(
-        tmp_path, env, time_limit=14.0, netem="ideal", attacker=(10.0, 10.0), defender=(40.0, 30.0),
-        attacker_behaviour="keyboard", defender_behaviour="follow-guidance",
-    )  # fmt: skip
+    launcher, out, _path = start_run(
+        tmp_path,
+        env,
+        time_limit=14.0,
+        netem="ideal",
+        attacker=(10.0, 10.0),
+        defender=(40.0, 30.0),
+        attacker_behaviour="keyboard",
+        defender_behaviour="follow-guidance",
+    )
     person = None
     try:
         command = None
@@ -186,11 +208,14 @@ def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):
         for p in (launcher, person):
             if p is not None and p.poll() is None:
                 p.kill()
-    track = [(e["t"], e["message"]) for e in read_events(out / "events.jsonl")
-             if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "attacker"]
+    track = [
+        (e["t"], e["message"])
+        for e in read_events(out / "events.jsonl")
+        if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "attacker"
+    ]
 
     def where(t):
-        from maps import load_map
+        from bearcat.maps import load_map
 
         m = min(track, key=lambda tm: abs(tm[0] - t))[1]
         return load_map("field-50").to_local(m["lat"], m["lon"])

@@ -8,9 +8,20 @@ import scipy.ndimage
 import shapely
 from shapely.geometry import Point, box
 
-from maps import ROLES, Map, MapError, Region, Zone, list_maps, load_map, rasterize
+from bearcat.maps import ROLES, Map, MapError, Region, Zone, list_maps, load_map, rasterize
 
-BUILT_IN = ["campus-200", "campus-250x200", "campus-400", "ctf-10", "field-50", "field-80x40", "maze-10", "maze-deadend-10", "square-10", "triangle-10"]
+BUILT_IN = [
+    "campus-200",
+    "campus-250x200",
+    "campus-400",
+    "ctf-10",
+    "field-50",
+    "field-80x40",
+    "maze-10",
+    "maze-deadend-10",
+    "square-10",
+    "triangle-10",
+]
 ORIGIN = (37.8719, -122.2585)
 
 
@@ -134,7 +145,9 @@ def test_list_maps_is_sorted_and_complete():
 
 
 def test_unknown_name_lists_the_built_in_maps():
-    with pytest.raises(MapError, match="no built-in map 'campus-500'; the built-in maps are campus-200, campus-250x200, campus-400"):
+    with pytest.raises(
+        MapError, match="no built-in map 'campus-500'; the built-in maps are campus-200, campus-250x200, campus-400"
+    ):
         load_map("campus-500")
 
 

@@ -5,7 +5,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from maps import list_maps
+from bearcat.maps import list_maps
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -58,12 +58,21 @@ def test_show_draws_a_png(tmp_path):
 
 def test_show_reads_a_user_file(tmp_path):
     path = tmp_path / "yard.geojson"
-    path.write_text(json.dumps({
-        "type": "FeatureCollection",
-        "bearcat": {"units": "metres", "origin": {"lat": 37.87, "lon": -122.26}},
-        "features": [{"type": "Feature", "properties": {"kind": "area"},
-                      "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [30, 0], [30, 20], [0, 20], [0, 0]]]}}],
-    }))
+    path.write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "bearcat": {"units": "metres", "origin": {"lat": 37.87, "lon": -122.26}},
+                "features": [
+                    {
+                        "type": "Feature",
+                        "properties": {"kind": "area"},
+                        "geometry": {"type": "Polygon", "coordinates": [[[0, 0], [30, 0], [30, 20], [0, 20], [0, 0]]]},
+                    }
+                ],
+            }
+        )
+    )
     result = bearcat("maps", "show", str(path), "--json")
     assert result.returncode == 0, result.stderr
     assert json.loads(result.stdout)["bounds"] == [0, 0, 30, 20]

@@ -9,10 +9,10 @@ import pytest
 import shapely
 from shapely.geometry import box
 
-import maps
-from maps import MapError, list_maps, load_map, read_geojson, write_geojson
-from maps.geodesy import to_geodetic
-from maps.geojson import parse_geojson
+from bearcat import maps
+from bearcat.maps import MapError, list_maps, load_map, read_geojson, write_geojson
+from bearcat.maps.geodesy import to_geodetic
+from bearcat.maps.geojson import parse_geojson
 
 ORIGIN = {"lat": 37.8719, "lon": -122.2585}
 
@@ -80,8 +80,14 @@ def test_drawing_primitives_become_polygons(tmp_path):
         [
             feature("area", polygon(0, 0, 100, 50), speed=0.5),
             feature("zone", {"type": "LineString", "coordinates": [[0, 25], [100, 25]]}, speed=1, width=4),
-            feature("obstacle", {"type": "MultiPolygon", "coordinates": [
-                polygon(10, 30, 20, 40)["coordinates"], polygon(30, 30, 40, 40)["coordinates"]]}, name="twins"),
+            feature(
+                "obstacle",
+                {
+                    "type": "MultiPolygon",
+                    "coordinates": [polygon(10, 30, 20, 40)["coordinates"], polygon(30, 30, 40, 40)["coordinates"]],
+                },
+                name="twins",
+            ),
             feature("region", {"type": "Point", "coordinates": [80, 10]}, name="flag", role="flag", radius=3),
             feature("region", polygon(0, 0, 10, 50), name="west", role="side", team="red"),
         ],
@@ -100,9 +106,16 @@ def test_a_file_drawn_in_degrees_without_origin(tmp_path):
     lon0, lat0 = -122.26, 37.87
     square = [[lon0, lat0], [lon0 + 0.001, lat0], [lon0 + 0.001, lat0 + 0.001], [lon0, lat0 + 0.001], [lon0, lat0]]
     path = tmp_path / "my-field.geojson"
-    path.write_text(json.dumps({"type": "FeatureCollection", "features": [
-        feature("area", {"type": "Polygon", "coordinates": [square]}),
-    ]}))
+    path.write_text(
+        json.dumps(
+            {
+                "type": "FeatureCollection",
+                "features": [
+                    feature("area", {"type": "Polygon", "coordinates": [square]}),
+                ],
+            }
+        )
+    )
     m = load_map(str(path))
     assert m.name == "my-field" and m.origin == (lat0, lon0)
     xmin, ymin, xmax, ymax = m.bounds
@@ -114,10 +127,14 @@ def test_degrees_file_keeps_its_origin(tmp_path):
     lat, lon = to_geodetic(25.0, 10.0, (ORIGIN["lat"], ORIGIN["lon"]))
     corner = [ORIGIN["lon"], ORIGIN["lat"]]
     triangle = [corner, [lon + 0.001, corner[1]], [lon + 0.001, lat + 0.001], corner]
-    path = write(tmp_path, [
-        feature("area", {"type": "Polygon", "coordinates": [triangle]}),
-        feature("region", {"type": "Point", "coordinates": [lon, lat]}, name="flag", role="flag", radius=1),
-    ], units="degrees")
+    path = write(
+        tmp_path,
+        [
+            feature("area", {"type": "Polygon", "coordinates": [triangle]}),
+            feature("region", {"type": "Point", "coordinates": [lon, lat]}, name="flag", role="flag", radius=1),
+        ],
+        units="degrees",
+    )
     centre = read_geojson(path).region("flag").geometry.centroid
     assert centre.distance(shapely.Point(25, 10)) < 1e-3
 
@@ -139,12 +156,20 @@ MALFORMED = [
     ([AREA, feature("zone", SQUARE)], {}, ZONE + "property 'speed' .* got None"),
     ([AREA, feature("zone", LINE, speed=1)], {}, ZONE + "property 'width' must be a number above zero"),
     (
-        [AREA, feature("region", SQUARE, name="flag", role="flag"), feature("region", SQUARE, name="flag", role="return")],
+        [
+            AREA,
+            feature("region", SQUARE, name="flag", role="flag"),
+            feature("region", SQUARE, name="flag", role="return"),
+        ],
         {},
         r"feature 2 \(region\): property 'name' repeats region name 'flag'",
     ),
     ([AREA, feature("region", SQUARE, role="flag")], {}, REGION + "property 'name' must be a non-empty string"),
-    ([AREA, feature("region", SQUARE, name="f", role="base")], {}, REGION + "property 'role' must be one of flag, return"),
+    (
+        [AREA, feature("region", SQUARE, name="f", role="base")],
+        {},
+        REGION + "property 'role' must be one of flag, return",
+    ),
     ([AREA, feature("region", POINT, name="f", role="flag")], {}, REGION + "property 'radius' must be a number above"),
     ([AREA, feature("obstacle", POINT)], {}, OBSTACLE + ": geometry must be one of Polygon, MultiPolygon; got Point"),
     ([AREA, feature("obstacle", BOWTIE)], {}, OBSTACLE + r": geometry is not a valid polygon \(Self-intersection"),

@@ -5,10 +5,10 @@ import pytest
 import shapely
 from shapely.geometry import Point, Polygon, box
 
-from maps import Map, MapError, Region, Zone, list_maps, load_map, rasterize
-from maps.raster import MAX_NODES
-from maps.scanline import TOLERANCE, coverage
-from solvers.grid import Grid
+from bearcat.maps import Map, MapError, Region, Zone, list_maps, load_map, rasterize
+from bearcat.maps.raster import MAX_NODES
+from bearcat.maps.scanline import TOLERANCE, coverage
+from bearcat.solvers.grid import Grid
 
 ORIGIN = (37.8719, -122.2585)
 
@@ -85,7 +85,7 @@ def test_edges_on_round_coordinates_survive_floating_point_node_positions():
     # Nodes at k * 0.1 miss 0.3 and 0.7 by a few 1e-17 m; they still lie on the edges.
     m = square_map(area=box(0, 0, 1, 1), obstacles=(box(0.3, 0.3, 0.7, 0.7),))
     r = rasterize(m, 0.1)
-    xs, ys = r.grid.axes()
+    xs, _ys = r.grid.axes()
     assert xs[3] != 0.3 or xs[7] != 0.7
     blocked = ~r.free
     assert blocked[4:7, 4:7].all()

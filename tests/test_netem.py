@@ -9,10 +9,19 @@ import numpy as np
 import pytest
 import shapely
 
-from bus import keys
-from netem.models import CompassError, CompassTrack, Delay, GilbertElliott, GpsError, GpsTrack, LinkModel, Outage
-from netem.profiles import ProfileError, load_profile, load_profiles
-from netem.shim import Shim
+from bearcat.bus import keys
+from bearcat.netem.models import (
+    CompassError,
+    CompassTrack,
+    Delay,
+    GilbertElliott,
+    GpsError,
+    GpsTrack,
+    LinkModel,
+    Outage,
+)
+from bearcat.netem.profiles import ProfileError, load_profile, load_profiles
+from bearcat.netem.shim import Shim
 
 FIX = keys.fix("g", "a1")
 STATE = keys.state("g")
@@ -21,8 +30,10 @@ PAYLOAD = b"x" * 60
 
 def stream(shim, n, key=FIX, period=0.1, sender="a1", receiver="gs", start=0.0):
     """``n`` messages at ``period``; (sent time, arrival times) each."""
-    return [(start + k * period, [d.at for d in shim.transmit(sender, receiver, key, PAYLOAD, start + k * period)])
-            for k in range(n)]  # fmt: skip
+    return [
+        (start + k * period, [d.at for d in shim.transmit(sender, receiver, key, PAYLOAD, start + k * period)])
+        for k in range(n)
+    ]
 
 
 # ---------------------------------------------------------------------- delay
@@ -102,9 +113,12 @@ def test_a_dead_zone_cuts_a_phone_off_and_poll_releases_what_was_held():
     position = {"a1": (5.0, 5.0)}
     records = []
     shim = Shim(
-        LinkModel(delay=Delay(0.1)), seed=8, dead_zones=shapely.box(0, 0, 10, 10),
-        where=position.get, record=records.append,
-    )  # fmt: skip
+        LinkModel(delay=Delay(0.1)),
+        seed=8,
+        dead_zones=shapely.box(0, 0, 10, 10),
+        where=position.get,
+        record=records.append,
+    )
     assert shim.transmit("a1", "gs", FIX, PAYLOAD, 1.0) == []
     assert shim.transmit("gs", "a1", STATE, PAYLOAD, 1.0, token="state #1") == []
     assert shim.poll(2.0) == []

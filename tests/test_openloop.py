@@ -7,10 +7,10 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from solvers import fmm
-from solvers.errors import InputError
-from solvers.grid import Grid
-from solvers.openloop import Defender, solve_openloop
+from bearcat.solvers import fmm
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
+from bearcat.solvers.openloop import Defender, solve_openloop
 
 
 def open_square(side=40.0, h=0.25):
@@ -185,9 +185,7 @@ def test_two_stages_with_defenders_never_worse_than_concatenation():
     two = solve_openloop(g, xa, [v, 0.8 * v], [bar, flag], defenders)
     one = solve_openloop(g, xa, [v], [bar], defenders)
     z, t1 = one.stages[0].goal, one.stages[0].value
-    later = fmm.travel_time(
-        0.8 * v, g.spacing, fmm.point_source(g, z, 0.8 * v) + t1, ceiling=one.capture_time
-    )
+    later = fmm.travel_time(0.8 * v, g.spacing, fmm.point_source(g, z, 0.8 * v) + t1, ceiling=one.capture_time)
     concatenated = later[flag].min()
     assert math.isfinite(two.value) and two.value <= concatenated + 1e-9
     assert_path_is_safe_and_consistent(two, xa, [bar, flag], [v, 0.8 * v])
@@ -227,8 +225,9 @@ def test_path_avoids_obstacles_and_takes_the_fast_walkway():
 
 def test_attacker_inside_capture_radius_is_blocked_at_once():
     g, v, mesh = open_square(side=20.0, h=0.5)
-    sol = solve_openloop(g, (5.0, 5.0), [v, v], [disk(mesh, (15, 15), 2), disk(mesh, (2, 18), 1)],
-                         [Defender((6.0, 5.0), v, 2.0)])
+    sol = solve_openloop(
+        g, (5.0, 5.0), [v, v], [disk(mesh, (15, 15), 2), disk(mesh, (2, 18), 1)], [Defender((6.0, 5.0), v, 2.0)]
+    )
     assert not sol.reached and sol.blocked_stage == 0 and sol.path is None
     assert sol.value == math.inf
     assert not sol.stages[0].safe.any() and sol.stages[0].safe_area == 0.0
@@ -245,8 +244,13 @@ def test_defender_on_top_of_the_attacker_captures_at_once_between_nodes():
 
 def test_second_target_guarded_blocks_stage_two_only():
     g, v, mesh = open_square(side=20.0, h=0.5)
-    sol = solve_openloop(g, (2.0, 2.0), [2 * v, 2 * v], [disk(mesh, (6, 3), 1), disk(mesh, (17, 17), 1)],
-                         [Defender((17.0, 16.0), v, 2.5)])
+    sol = solve_openloop(
+        g,
+        (2.0, 2.0),
+        [2 * v, 2 * v],
+        [disk(mesh, (6, 3), 1), disk(mesh, (17, 17), 1)],
+        [Defender((17.0, 16.0), v, 2.5)],
+    )
     assert sol.blocked_stage == 1 and sol.path is None
     assert math.isfinite(sol.stages[0].value) and sol.stages[0].goal is not None
     assert sol.stages[1].value == math.inf

@@ -14,8 +14,8 @@ import shapely
 from shapely.geometry import LineString, Point, Polygon
 from shapely.geometry.polygon import orient
 
-from solvers.errors import InputError
-from solvers.pursuit import (
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.pursuit import (
     ConvexAreaPursuit,
     ConvexFarthestPointEvader,
     StraightPursuit,
@@ -180,14 +180,14 @@ def test_lemma3_gradient_matches_finite_differences(name):
         if any(len(q.vertices) != len(g.vertices) or (q.active != g.active).any() for q in probes):
             continue
         checked += 1
-        fd_p = central_difference(lambda x: area(voronoi_cell(domain, e, x)), p)
+        fd_p = central_difference(lambda x, e=e: area(voronoi_cell(domain, e, x)), p)
         np.testing.assert_allclose(g.gradient, fd_p, atol=1e-6)
-        fd_e = central_difference(lambda x: area(voronoi_cell(domain, x, p)), e)
+        fd_e = central_difference(lambda x, p=p: area(voronoi_cell(domain, x, p)), e)
         np.testing.assert_allclose(evader_area_gradient(domain, e, p), fd_e, atol=1e-6)
-        L, l = g.line_length[g.active], g.line_split[g.active]
-        crosses += int(np.sum((l >= 0) & (l <= L)))  # first case of Lemma 3
-        beyond += int(np.sum(l > L))  # second case, B_i on the -eta_v side (Fig. 5.2c)
-        short_of += int(np.sum(l < 0))  # second case, B_i on the +eta_v side
+        length, split = g.line_length[g.active], g.line_split[g.active]  # the thesis's L and l
+        crosses += int(np.sum((split >= 0) & (split <= length)))  # first case of Lemma 3
+        beyond += int(np.sum(split > length))  # second case, B_i on the -eta_v side (Fig. 5.2c)
+        short_of += int(np.sum(split < 0))  # second case, B_i on the +eta_v side
     assert checked > 150
     assert crosses > 50 and beyond > 10 and short_of > 10
 
@@ -206,13 +206,13 @@ def test_lemma3_for_one_pursuer_across_the_square():
 # --- Lemma 5: dA/dt <= 0 ---
 
 
-def gamma_star(e, q, L, l):
-    """Eq. 5.14 built from the thesis's alpha_h, alpha_v and local frame."""
+def gamma_star(e, q, length, split):
+    """Eq. 5.14 built from the thesis's alpha_h, alpha_v and local frame (L = length, l = split)."""
     xi = e - q
     eta_h = xi / np.hypot(*xi)
     eta_v = np.array([-eta_h[1], eta_h[0]])
-    alpha_h = -L / 2
-    alpha_v = (l**2 - (L - l) ** 2) / (2 * np.hypot(*xi))
+    alpha_h = -length / 2
+    alpha_v = (split**2 - (length - split) ** 2) / (2 * np.hypot(*xi))
     return (alpha_h * eta_h - alpha_v * eta_v) / np.hypot(alpha_h, alpha_v)
 
 

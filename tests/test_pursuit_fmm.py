@@ -7,12 +7,12 @@ import numpy as np
 import pytest
 from shapely.geometry import LineString, Polygon, box
 
-from maps import load_map, rasterize
-from solvers.errors import InputError
-from solvers.pursuit_fmm import (
+from bearcat.maps import load_map, rasterize
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.pursuit_fmm import (
     FarthestPointEvader,
-    FmmArena,
     FmmAreaPursuit,
+    FmmArena,
     GeodesicPursuit,
     safe_set,
 )
@@ -172,9 +172,7 @@ def test_cached_fronts_give_the_same_sets_as_a_fresh_arena(arenas):
     e, ps = (5.0, 8.5), [(2.0, 2.0), (8.0, 1.0)]
     for speeds, radius in ((1.0, 0.5), ((1.5, 0.8), 0.5), (1.0, 0.0), ((1.5, 0.8), 0.3)):
         cached = safe_set(arena, e, ps, pursuer_speeds=speeds, capture_radius=radius)
-        fresh = safe_set(
-            FmmArena(raster.grid, raster.speed), e, ps, pursuer_speeds=speeds, capture_radius=radius
-        )
+        fresh = safe_set(FmmArena(raster.grid, raster.speed), e, ps, pursuer_speeds=speeds, capture_radius=radius)
         np.testing.assert_array_equal(cached.mask, fresh.mask)
         np.testing.assert_array_equal(cached.pursuer_times, fresh.pursuer_times)
     assert arena.travel_time((2.0, 2.0)) is arena.travel_time((2.0, 2.0))
@@ -323,7 +321,7 @@ def test_headings_never_point_into_obstacles(arenas, name):
     rng = np.random.default_rng(7)
     strategies = [FmmAreaPursuit(arena), FmmAreaPursuit(arena, gradient="finite"), GeodesicPursuit(arena)]
     checked = 0
-    for trial in range(24):
+    for _trial in range(24):
         pts = placements(raster, 3, rng)
         if np.hypot(*(pts[1:] - pts[0]).T).min() <= 0.6:
             continue

@@ -4,8 +4,8 @@ and a chase whose capture time is known in closed form."""
 import numpy as np
 import pytest
 
-from solvers.errors import InputError
-from solvers.pursuit_game import first_contact, pursue
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.pursuit_game import first_contact, pursue
 
 
 def test_agents_that_pass_through_each_other_within_one_step_are_caught():
@@ -40,8 +40,16 @@ def test_a_faster_pursuer_catches_a_fleeing_evader_when_the_gap_closes_to_the_ra
     # Gap 4, closing at 2 - 1 = 1 per unit time: capture at (4 - 0.5) / 1 = 3.5,
     # whatever the step, since contact is found inside the step.
     for dt in (0.01, 0.3, 0.7):
-        chase = pursue(Toward(), Away((1.0, 0.0)), (5.0, 5.0), [(1.0, 5.0)], passable=open_field, dt=dt,
-                       capture_radius=0.5, pursuer_speeds=2.0)  # fmt: skip
+        chase = pursue(
+            Toward(),
+            Away((1.0, 0.0)),
+            (5.0, 5.0),
+            [(1.0, 5.0)],
+            passable=open_field,
+            dt=dt,
+            capture_radius=0.5,
+            pursuer_speeds=2.0,
+        )
         assert chase.captured and chase.captor == 0
         assert chase.capture_time == pytest.approx(3.5, abs=1e-9)
         assert np.hypot(*(chase.evader[-1] - chase.pursuers[-1, 0])) == pytest.approx(0.5)
@@ -56,8 +64,7 @@ def test_walls_stop_the_evader_and_the_chase_ends_there():
 
 
 def test_an_evader_that_keeps_its_distance_is_never_caught_and_the_clock_stops_at_the_limit():
-    chase = pursue(Toward(), Away((0.0, 1.0)), (5.0, 1.0), [(5.0, -3.0)], passable=lambda p: True, dt=0.1,
-                   max_time=4.0)  # fmt: skip
+    chase = pursue(Toward(), Away((0.0, 1.0)), (5.0, 1.0), [(5.0, -3.0)], passable=lambda p: True, dt=0.1, max_time=4.0)
     assert not chase.captured and chase.times[-1] == pytest.approx(4.0)
     assert np.allclose(np.hypot(*(chase.evader - chase.pursuers[:, 0]).T), 4.0)
 

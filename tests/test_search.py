@@ -10,9 +10,9 @@ import shapely
 from scipy import ndimage
 from shapely.geometry import box
 
-from solvers.errors import InputError
-from solvers.grid import Grid
-from solvers.search import (
+from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
+from bearcat.solvers.search import (
     PossibleDefender,
     Weights,
     footprint,
@@ -162,7 +162,7 @@ def segment_is_free(a, b):
     t = np.linspace(0.0, 1.0, 60)[:, None]
     p = a + t * (b - a)
     inside = [(p[:, 0] > x0) & (p[:, 0] < x1) & (p[:, 1] > y0) & (p[:, 1] < y1) for x0, y0, x1, y1 in BUILDINGS]
-    return (0 <= p).all() and (p[:, 0] <= 100).all() and (p[:, 1] <= 80).all() and not np.any(inside)
+    return (p >= 0).all() and (p[:, 0] <= 100).all() and (p[:, 1] <= 80).all() and not np.any(inside)
 
 
 def along(path, distance):
@@ -259,13 +259,21 @@ def strip_case(win_band):
     return grid, terrain, possible, seen_attacker, defender_wins
 
 
-def target_for(case, uav=(50.0, 0.0), seen_uav=None, weights=Weights(), attacker=(5.0, 20.0), **speeds):
+def target_for(case, uav=(50.0, 0.0), seen_uav=None, weights=None, attacker=(5.0, 20.0), **speeds):
     grid, terrain, possible, seen_attacker, defender_wins = case
     if seen_uav is None:
         seen_uav = np.zeros(grid.shape, dtype=bool)
     return search_target(
-        terrain, grid, possible, seen_attacker, seen_uav, defender_wins,
-        attacker=attacker, uav=uav, weights=weights, **(SPEEDS | speeds),
+        terrain,
+        grid,
+        possible,
+        seen_attacker,
+        seen_uav,
+        defender_wins,
+        attacker=attacker,
+        uav=uav,
+        weights=weights or Weights(),
+        **(SPEEDS | speeds),
     )
 
 

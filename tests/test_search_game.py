@@ -11,10 +11,10 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from agents.ground_station.recorder import read_events
-from agents.ground_station.uav_tasking import TRACK_FOR
-from scenarios.schema import ScenarioError, load_scenario, parse_scenario
-from scenarios.simulate import simulate
+from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.uav_tasking import TRACK_FOR
+from bearcat.scenarios.schema import ScenarioError, load_scenario, parse_scenario
+from bearcat.scenarios.simulate import simulate
 
 
 def _text(**changes) -> str:
@@ -68,13 +68,21 @@ def test_the_attacker_is_told_of_the_defender_only_after_its_side_saw_it(scenari
         if found is not None:
             break
     assert found is not None, "the defender was never found in six games"
-    told = [e for e in read_events(events) if e["event"] == "sent" and e["message"].get("type") == "guidance"
-            and e["message"]["agent"] == "attacker"
-            and any(r["agent"] == "defender" for r in e["message"]["reports"])]  # fmt: skip
+    told = [
+        e
+        for e in read_events(events)
+        if e["event"] == "sent"
+        and e["message"].get("type") == "guidance"
+        and e["message"]["agent"] == "attacker"
+        and any(r["agent"] == "defender" for r in e["message"]["reports"])
+    ]
     assert told, "the attacker never learnt where the defender was"
     assert min(e["t"] for e in told) >= found - 1e-9
-    everyone = [e for e in read_events(events) if e["event"] == "sent" and e["message"].get("type") == "guidance"
-                and e["message"]["agent"] == "attacker"]  # fmt: skip
+    everyone = [
+        e
+        for e in read_events(events)
+        if e["event"] == "sent" and e["message"].get("type") == "guidance" and e["message"]["agent"] == "attacker"
+    ]
     assert all(e["message"]["game"] == "search" and e["message"]["possible"] for e in everyone[:20])
     assert any(r["agent"] == "q1" for r in everyone[-1]["message"]["reports"])  # its UAV, always
 
@@ -83,8 +91,11 @@ def test_the_uav_climbs_searches_once_a_second_and_its_camera_finds_the_defender
     events = tmp_path / "events.jsonl"
     outcome = simulate(scenario, seed=0, events=events)
     log = read_events(events)
-    uav_truth = [e["message"] for e in log if e["event"] == "sent" and e["message"].get("type") == "truth"
-                 and e["message"]["agent"] == "q1"]  # fmt: skip
+    uav_truth = [
+        e["message"]
+        for e in log
+        if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "q1"
+    ]
     assert max(m["alt"] for m in uav_truth) == pytest.approx(20.0, abs=0.6)
     tasks = [e["t"] for e in log if e["event"] == "sent" and e["message"].get("type") == "uav-task"]
     assert len(tasks) >= 0.8 * (tasks[-1] - tasks[0]) and np.all(np.diff(tasks) > 0.5)
@@ -100,7 +111,9 @@ def test_the_uav_climbs_searches_once_a_second_and_its_camera_finds_the_defender
 
 
 def test_uav_tables_are_checked_key_by_key():
-    with pytest.raises(ScenarioError, match=r"uav\[0\]\.search 'random' is not one of reachability, lawnmower, nearest"):
+    with pytest.raises(
+        ScenarioError, match=r"uav\[0\]\.search 'random' is not one of reachability, lawnmower, nearest"
+    ):
         parse_scenario(_text(**{'search = "reachability"': 'search = "random"'}), source="s.toml")
     with pytest.raises(ScenarioError, match=r"uav\[0\]\.start \[300.0, 12.0\] is off map campus-250x200"):
         parse_scenario(_text(**{"start = [125.0, 12.0]": "start = [300.0, 12.0]"}), source="s.toml")
@@ -115,9 +128,9 @@ def test_uav_tables_are_checked_key_by_key():
 def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario):
     """The phone's value is the worst over P_D: go with P_D in a corner where
     the defender loses, no go once P_D also holds a place where it wins."""
-    from agents.ground_station.guidance import _Fixes
-    from bus.messages import Fix
-    from scenarios.cast import _CtfGame
+    from bearcat.agents.ground_station.guidance import _Fixes
+    from bearcat.bus.messages import Fix
+    from bearcat.scenarios.cast import _CtfGame
 
     game = _CtfGame(scenario)
     advisor = game.guidance().advisor
@@ -139,17 +152,24 @@ def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario
     assert solved.evaluate(attacker, (30.0, 20.0), "return").value <= 0
     both = answer((30.0, 20.0), (125.0, 170.0))  # and between the attacker and home
     assert both["worst_case"] and not both["go"] and both["value"] > 0
-    assert both["value"] == pytest.approx(max(solved.evaluate(attacker, d, "return").value
-                                              for d in np.argwhere(tasker.picture.possible)
-                                              * np.asarray(tasker.grid.spacing) + np.asarray(tasker.grid.lo)), abs=0.3)
+    assert both["value"] == pytest.approx(
+        max(
+            solved.evaluate(attacker, d, "return").value
+            for d in np.argwhere(tasker.picture.possible) * np.asarray(tasker.grid.spacing) + np.asarray(tasker.grid.lo)
+        ),
+        abs=0.3,
+    )
 
 
 def test_a_capture_radius_the_grid_cannot_resolve_is_refused():
-    from scenarios.cast import _CtfGame
+    from bearcat.scenarios.cast import _CtfGame
 
     coarse = parse_scenario(_text(**{"capture_radius = 7.5": "capture_radius = 5.0"}), source="s.toml")
-    with pytest.raises(ScenarioError, match=r"capture_radius 5 m is less than a cell of the 35-point grid on map "
-                                            r"campus-250x200 \(7.35 m\).*at least 51"):
+    with pytest.raises(
+        ScenarioError,
+        match=r"capture_radius 5 m is less than a cell of the 35-point grid on map "
+        r"campus-250x200 \(7.35 m\).*at least 51",
+    ):
         _CtfGame(coarse)
 
 
@@ -186,8 +206,10 @@ search = "reachability"
 
 
 def test_uavs_of_one_side_search_by_one_strategy():
-    from scenarios.cast import _CtfGame
+    from bearcat.scenarios.cast import _CtfGame
 
     mixed = _text() + '[[uav]]\nid = "q2"\nteam = "attacker"\nstart = [135.0, 12.0]\nsearch = "nearest"\n'
-    with pytest.raises(ScenarioError, match="the UAVs of a side search together, by one strategy; these mix nearest and reachability"):
+    with pytest.raises(
+        ScenarioError, match="the UAVs of a side search together, by one strategy; these mix nearest and reachability"
+    ):
         _CtfGame(parse_scenario(mixed, source="mixed.toml")).tasker()

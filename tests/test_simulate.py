@@ -3,20 +3,21 @@ allow, the same seed giving the same event log line for line, the network
 profile showing in what the log records, and the referee's rules on their
 own."""
 
+import itertools
 import json
 
 import numpy as np
 import pytest
 import shapely
-
-from agents.ground_station.recorder import read_events
-from agents.ground_station.referee import Contest, Referee
-from bus import keys
-from bus.messages import Control, Truth
 from field import write_scenario
-from maps import load_map
-from scenarios.schema import load_scenario
-from scenarios.simulate import simulate
+
+from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.referee import Contest, Referee
+from bearcat.bus import keys
+from bearcat.bus.messages import Control, Truth
+from bearcat.maps import load_map
+from bearcat.scenarios.schema import load_scenario
+from bearcat.scenarios.simulate import simulate
 
 
 @pytest.fixture(autouse=True)
@@ -36,7 +37,7 @@ def test_a_game_finishes_with_a_winner_and_a_reason_the_rules_give(tmp_path):
     assert any(word in outcome.reason for word in ("captured", "returned the flag", "time limit"))
     assert events[-1]["event"] == "outcome" and events[-1]["winner"] == outcome.winner
     states = [e["message"] for e in events if e["event"] == "sent" and e["message"]["type"] == "state"]
-    assert [s["phase"] for s in states][0] == "waiting" and states[-1]["phase"] == "ended"
+    assert next(s["phase"] for s in states) == "waiting" and states[-1]["phase"] == "ended"
     assert states[-1]["elapsed"] == pytest.approx(outcome.elapsed)
 
 
@@ -50,7 +51,7 @@ def test_the_same_seed_gives_the_same_event_log_and_another_seed_does_not(tmp_pa
 
 
 def test_guidance_comes_from_fixes_the_network_delivered(tmp_path):
-    outcome, events = play(tmp_path, netem="3g-degraded", seed=1)
+    _outcome, events = play(tmp_path, netem="3g-degraded", seed=1)
     impaired = [e for e in events if e["event"] == "impaired"]
     actions = {e["action"] for e in impaired}
     assert "dropped" in actions and "delivered" in actions
@@ -59,10 +60,16 @@ def test_guidance_comes_from_fixes_the_network_delivered(tmp_path):
     # Every fix the ground station received was sent before it arrived, and
     # the lost ones (by seq) are exactly those the shim dropped on that link.
     sent = {(e["key"], e["message"]["seq"]): e["t"] for e in events if e["event"] == "sent" and "/fix/" in e["key"]}
-    got = [(e["key"], e["seq"], e["t"]) for e in events if e["event"] == "received" and e["receiver"] == "gs" and "/fix/" in e["key"]]
+    got = [
+        (e["key"], e["seq"], e["t"])
+        for e in events
+        if e["event"] == "received" and e["receiver"] == "gs" and "/fix/" in e["key"]
+    ]
     assert got and all(t >= sent[(k, s)] for k, s, t in got)
     dropped = sum(1 for e in impaired if e["action"] == "dropped" and "/fix/" in e["key"] and e["receiver"] == "gs")
-    duplicated = sum(1 for e in impaired if e["action"] == "duplicated" and "/fix/" in e["key"] and e["receiver"] == "gs")
+    duplicated = sum(
+        1 for e in impaired if e["action"] == "duplicated" and "/fix/" in e["key"] and e["receiver"] == "gs"
+    )
     ended = max(e["t"] for e in events if e["event"] != "outcome")
     in_time = [k for k, t in sent.items() if t < ended - 3.0]  # sent early enough to have arrived
     received = {(k, s) for k, s, _ in got}
@@ -73,13 +80,19 @@ def test_guidance_comes_from_fixes_the_network_delivered(tmp_path):
 def test_ideal_network_delivers_every_fix_at_once(tmp_path):
     _, events = play(tmp_path, netem="ideal")
     sent = {(e["key"], e["message"]["seq"]): e["t"] for e in events if e["event"] == "sent" and "/fix/" in e["key"]}
-    got = {(e["key"], e["seq"]): e["t"] for e in events if e["event"] == "received" and e["receiver"] == "gs" and "/fix/" in e["key"]}
+    got = {
+        (e["key"], e["seq"]): e["t"]
+        for e in events
+        if e["event"] == "received" and e["receiver"] == "gs" and "/fix/" in e["key"]
+    }
     assert got and set(got) == set(sent) and all(got[k] == sent[k] for k in got)
     assert not [e for e in events if e["event"] == "impaired"]
 
 
 def test_an_aided_defender_that_starts_winning_keeps_the_attacker_out(tmp_path):
-    outcome, _ = play(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, netem="ideal", time_limit=20.0)
+    outcome, _ = play(
+        tmp_path, defender_behaviour="follow-guidance", defender_aided=True, netem="ideal", time_limit=20.0
+    )
     assert outcome.winner == "defender"
 
 
@@ -98,9 +111,15 @@ def referee(**kw):
     home = field.region("home").geometry
     flag = field.region("flag").geometry
     contest = Contest(
-        runners=("a",), chasers=("d",), capture_radius=2.5, time_limit=kw.get("limit", 60.0), teams=("attacker", "defender"),
-        targets=(("home", home),), forbidden=(("flag", flag), ("return", home)), flag_taken=True,
-    )  # fmt: skip
+        runners=("a",),
+        chasers=("d",),
+        capture_radius=2.5,
+        time_limit=kw.get("limit", 60.0),
+        teams=("attacker", "defender"),
+        targets=(("home", home),),
+        forbidden=(("flag", flag), ("return", home)),
+        flag_taken=True,
+    )
     return Referee("g", field, contest), field
 
 
@@ -163,7 +182,7 @@ def test_outcome_json_of_the_cli_matches_the_event_log(tmp_path):
 
 
 def test_walkers_never_enter_buildings_or_forbidden_regions():
-    from agents.human.walker import Walker
+    from bearcat.agents.human.walker import Walker
 
     campus = load_map("campus-200")
     hall = campus.obstacles[0]
@@ -179,14 +198,14 @@ def test_walkers_never_enter_buildings_or_forbidden_regions():
 
 
 def test_a_walker_turns_only_after_its_reaction_time():
-    from agents.human.walker import Walker
+    from bearcat.agents.human.walker import Walker
 
     w = Walker(load_map("field-50"), (25.0, 25.0), speed=1.0, reaction=0.5, rng=np.random.default_rng(0))
     w.intend(0.0, (1.0, 0.0))
     positions = []
     for k in range(10):
         positions.append(w.step(k * 0.1, 0.1).copy())
-    moved = [float(np.hypot(*(b - a))) for a, b in zip(positions, positions[1:])]
+    moved = [float(np.hypot(*(b - a))) for a, b in itertools.pairwise(positions)]
     assert positions[4][0] == pytest.approx(25.0) and moved[-1] == pytest.approx(0.1)
 
 
@@ -203,7 +222,7 @@ def test_aided_pursuers_capture_the_evader_and_see_their_boundary(tmp_path):
     # The evader's cell is shown, and its area only shrinks as the chase goes on.
     areas = [m["value"] for m in answered if m["agent"] == "pursuer-1"]
     assert areas[0] > 1000 and areas[-1] < 0.2 * areas[0]
-    assert all(m["boundary"] for m in answered[len(answered) // 2:])
+    assert all(m["boundary"] for m in answered[len(answered) // 2 :])
 
 
 def test_against_real_players_the_referee_judges_on_fixes_and_says_so():
@@ -215,7 +234,7 @@ def test_against_real_players_the_referee_judges_on_fixes_and_says_so():
 
 
 def test_keys_steer_a_keyboard_walker_and_space_stops_it():
-    from agents.human.behaviours import Keyboard
+    from bearcat.agents.human.behaviours import Keyboard
 
     keyboard = Keyboard()
     assert keyboard.decide(0.0, None, None, None) is None

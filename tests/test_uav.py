@@ -17,15 +17,15 @@ import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-from agents.uav.agent import UavAgent  # noqa: E402
-from agents.uav.airframe import Airframe, Body, PointMass  # noqa: E402
-from agents.uav.autopilot import MavsdkAutopilot, SimulatedAutopilot  # noqa: E402
-from agents.uav.flight import DISARM_LANDED, DISARM_PREFLIGHT, Flight, Main, Result, Sub  # noqa: E402
-from bus import keys  # noqa: E402
-from bus.messages import Control, Truth, UavTask  # noqa: E402
-from maps.geodesy import to_geodetic, to_local  # noqa: E402
+from bearcat.agents.uav.agent import UavAgent
+from bearcat.agents.uav.airframe import Airframe, Body, PointMass
+from bearcat.agents.uav.autopilot import MavsdkAutopilot, SimulatedAutopilot
+from bearcat.agents.uav.flight import DISARM_LANDED, DISARM_PREFLIGHT, Flight, Main, Result, Sub
+from bearcat.bus import keys
+from bearcat.bus.messages import Control, Truth, UavTask
+from bearcat.maps.geodesy import to_geodetic, to_local
 
 HOME = (37.8719, -122.2585, 60.0)
 GAME = "sky"
@@ -63,7 +63,7 @@ def test_holding_against_wind_costs_battery_and_gusts_leave_a_metre_or_two():
     gusty = Airframe(gust=2.0)
     mass = PointMass(gusty, Body(np.array([0.0, 0.0, 10.0]), np.zeros(3)), np.random.default_rng(2))
     errors = []
-    for k in range(20000):
+    for _k in range(20000):
         mass.step(0.02, target=(0.0, 0.0, 10.0))
         errors.append(np.hypot(*mass.body.position[:2]))
     assert 0.2 < np.sqrt(np.mean(np.square(errors))) < 2.5  # the thesis: hover accuracy of 1-2 m
@@ -159,10 +159,22 @@ class Vehicle:
         self.sysid = sysid
         home_arg = ",".join(str(v) for v in home)
         self.process = subprocess.Popen(
-            [sys.executable, "-m", "bearcat", "vehicle", "--connect", f"udpout:127.0.0.1:{self.port}",
-             "--sysid", str(sysid), "--home", home_arg],
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        )  # fmt: skip
+            [
+                sys.executable,
+                "-m",
+                "bearcat",
+                "vehicle",
+                "--connect",
+                f"udpout:127.0.0.1:{self.port}",
+                "--sysid",
+                str(sysid),
+                "--home",
+                home_arg,
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
 
     @property
     def url(self) -> str:
@@ -223,7 +235,9 @@ def test_mavsdk_client_arms_takes_off_flies_a_goto_and_lands(vehicle):
             _start(agent)
             await _fly(agent, 15.0, until=lambda s: s.in_air and s.alt > 4.5 and s.mode == "hold")
             agent.handle(keys.uav_task(GAME, "q1"), _task(1, 30.0, 20.0), time.monotonic())
-            await _fly(agent, 20.0, until=lambda s: math.hypot(*to_local(s.lat, s.lon, HOME[:2])) > 35.5 and s.speed < 0.3)
+            await _fly(
+                agent, 20.0, until=lambda s: math.hypot(*to_local(s.lat, s.lon, HOME[:2])) > 35.5 and s.speed < 0.3
+            )
             east, north = to_local(agent.state.lat, agent.state.lon, HOME[:2])
             assert math.hypot(east - 30.0, north - 20.0) < 1.0
             assert agent.state.armed and abs(agent.state.alt - 5.0) < 0.6
@@ -280,7 +294,9 @@ def test_a_silent_ground_station_triggers_the_failsafe(vehicle, failsafe):
             if failsafe == "land":
                 await _fly(agent, 20.0, until=lambda s: not s.armed)
             else:
-                await _fly(agent, 5.0, until=lambda s: agent.failsafe_at is not None and s.mode == "hold" and s.speed < 0.3)
+                await _fly(
+                    agent, 5.0, until=lambda s: agent.failsafe_at is not None and s.mode == "hold" and s.speed < 0.3
+                )
                 assert agent.state.in_air
             assert any(f"failsafe {failsafe}" in e for _, e in agent.events)
         finally:
@@ -379,23 +395,34 @@ def test_a_live_search_game_flies_the_uav_through_mavsdk_and_leaves_no_process(t
     """``bearcat run`` on the search scenario: a vehicle emulator and a UAV peer
     beside the ground station and the walkers, the UAV armed, flown and
     tasked over MAVLink and Zenoh; every process gone at the end."""
-    from agents.ground_station.recorder import read_events
-    from scenarios.schema import load_scenario
+    from bearcat.agents.ground_station.recorder import read_events
+    from bearcat.scenarios.schema import load_scenario
 
     # The 35-point game the search-game tests solve too, from the same cache.
-    text = load_scenario("search").text.replace("grid = 45", "grid = 35").replace("time_limit = 240.0", "time_limit = 25.0")
+    text = (
+        load_scenario("search")
+        .text.replace("grid = 45", "grid = 35")
+        .replace("time_limit = 240.0", "time_limit = 25.0")
+    )
     path = tmp_path / "search.toml"
     path.write_text(text)
     out = tmp_path / "run"
-    run = subprocess.run([sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
-                         capture_output=True, text=True, timeout=300)  # fmt: skip
+    run = subprocess.run(
+        [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert run.returncode == 0, run.stdout + run.stderr
     outcome = json.loads((out / "outcome.json").read_text())
     assert outcome["ended"] and set(outcome["peers"]) >= {"q1", "vehicle-q1"}, outcome
     assert all(code == 0 for code in outcome["peers"].values()), outcome["peers"]
     events = read_events(out / "events.jsonl")
-    climbed = [e["message"]["alt"] for e in events if e["event"] == "sent" and e["message"].get("type") == "truth"
-               and e["message"]["agent"] == "q1"]  # fmt: skip
+    climbed = [
+        e["message"]["alt"]
+        for e in events
+        if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "q1"
+    ]
     assert climbed and max(climbed) > 15.0
     assert sum(e["event"] == "sent" and e["message"].get("type") == "uav-task" for e in events) >= 5
     assert (out / "recording.rrd").exists()

@@ -7,10 +7,10 @@ import numpy as np
 import shapely
 from shapely.geometry import box
 
-from maps import Map, MapError, rasterize
-from maps.distance import signed_distance
-from solvers.ctf import Arena
-from solvers.grid import Grid
+from bearcat.maps import Map, MapError, rasterize
+from bearcat.maps.distance import signed_distance
+from bearcat.solvers.ctf import Arena
+from bearcat.solvers.grid import Grid
 
 MIN_GRID_POINTS = 9
 

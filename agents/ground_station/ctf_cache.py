@@ -14,11 +14,10 @@ directory is safe to delete; a damaged entry is logged and solved again.
 
 from __future__ import annotations
 
-import math
-
 import hashlib
 import json
 import logging
+import math
 import os
 import tempfile
 from dataclasses import asdict, dataclass
@@ -27,10 +26,10 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.ground_station.ctf_arena import ctf_arena
-from maps import Map
-from maps.geojson import dumps
-from solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
+from bearcat.agents.ground_station.ctf_arena import ctf_arena
+from bearcat.maps import Map
+from bearcat.maps.geojson import dumps
+from bearcat.solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
 
 log = logging.getLogger(__name__)
 
@@ -145,9 +144,15 @@ def load_or_solve(
                 known[name] = loaded
                 sources[name] = "cache"
     solution = solve_ctf(
-        arena, game.rules, stages, scheme=game.scheme, dtype=np.dtype(game.dtype), tol=game.tol,
-        known=known, progress=progress,
-    )  # fmt: skip
+        arena,
+        game.rules,
+        stages,
+        scheme=game.scheme,
+        dtype=np.dtype(game.dtype),
+        tol=game.tol,
+        known=known,
+        progress=progress,
+    )
     for name, solved in solution.sets.items():
         if name not in known:
             sources[name] = "solved"
@@ -175,9 +180,14 @@ def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
             if array.shape != shape:
                 raise ValueError(f"shape {array.shape}, expected {shape}")
         return SetSolution(
-            meta["name"], value, bool(meta["converged"]), meta["converged_at"], float(meta["time"]),
-            int(meta["steps"]), time_to_win,
-        )  # fmt: skip
+            meta["name"],
+            value,
+            bool(meta["converged"]),
+            meta["converged_at"],
+            float(meta["time"]),
+            int(meta["steps"]),
+            time_to_win,
+        )
     except (OSError, EOFError, ValueError, KeyError, TypeError) as exc:
         log.warning("cached set %s is unreadable (%s); solving it again", path, exc)
         return None

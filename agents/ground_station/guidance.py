@@ -28,12 +28,12 @@ import numpy as np
 import shapely
 import shapely.ops
 
-from agents.protocol import Send
-from bus import keys
-from bus.messages import Detection, Fix, GameState, Guidance, Message, Report
-from maps import Map
-from solvers.ctf_guidance import Guidance as CtfGuidance
-from solvers.errors import InputError
+from bearcat.agents.protocol import Send
+from bearcat.bus import keys
+from bearcat.bus.messages import Detection, Fix, GameState, Guidance, Message, Report
+from bearcat.maps import Map
+from bearcat.solvers.ctf_guidance import Guidance as CtfGuidance
+from bearcat.solvers.errors import InputError
 
 MAX_RING_POINTS = 4096
 SPOTTED_FOR = 2.0  # s an agent's screen says a UAV saw it
@@ -69,8 +69,18 @@ class GuidanceService:
     role = "ground-station"
     watches: tuple[str, ...] = ()
 
-    def __init__(self, game: str, game_map: Map, agents, *, advisor=None, aided=None, rate: float = 10.0,
-                 name: str = "gs", sight=None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        game: str,
+        game_map: Map,
+        agents,
+        *,
+        advisor=None,
+        aided=None,
+        rate: float = 10.0,
+        name: str = "gs",
+        sight=None,
+    ) -> None:
         self.game, self.name, self.map = game, name, game_map
         self.agents = tuple(agents)
         self.advisor = advisor
@@ -149,7 +159,12 @@ class GuidanceService:
             self.seq += 1
             self._last[agent] = now
             reports = everything if everything is not None else fixes.reports()
-            out.append(Send(keys.guidance(self.game, agent), Guidance(agent=agent, seq=self.seq, t=now, reports=reports, **fields)))
+            out.append(
+                Send(
+                    keys.guidance(self.game, agent),
+                    Guidance(agent=agent, seq=self.seq, t=now, reports=reports, **fields),
+                )
+            )
         return out
 
 
@@ -197,12 +212,18 @@ class CtfAdvisor:
             return {"game": "ctf", "note": str(exc)[:200]}
         if agent == self.attacker:
             values, side, region_of, heading = (
-                self.solved.defender_region_values(a, self.phase), "defender", self.defender, report.attacker_heading,
-            )  # fmt: skip
+                self.solved.defender_region_values(a, self.phase),
+                "defender",
+                self.defender,
+                report.attacker_heading,
+            )
         else:
             values, side, region_of, heading = (
-                self.solved.attacker_region_values(d, self.phase), "attacker", self.attacker, report.defender_heading,
-            )  # fmt: skip
+                self.solved.attacker_region_values(d, self.phase),
+                "attacker",
+                self.attacker,
+                report.defender_heading,
+            )
         return {
             "game": "ctf",
             "heading": None if heading is None else _bearing(heading),
@@ -237,7 +258,7 @@ class PursuitAdvisor:
     without a boundary); ``value`` is the area of S_e in square metres."""
 
     def __init__(self, game_map: Map, *, evader: str, pursuers) -> None:
-        from solvers.pursuit import area_minimising_headings, voronoi_cell
+        from bearcat.solvers.pursuit import area_minimising_headings, voronoi_cell
 
         self.map = game_map
         self.evader, self.pursuers = evader, tuple(pursuers)
@@ -269,7 +290,9 @@ class PursuitAdvisor:
         except InputError as exc:
             return {"game": "pursuit", "note": str(exc)[:200]}
         # Pursuer k's active boundary: the cell's corners as far from it as from the evader.
-        on_line = [v for v in cell if abs(np.hypot(*(v - ps[k])) - np.hypot(*(v - e))) < 1e-6 * max(1.0, np.hypot(*(v - e)))]
+        on_line = [
+            v for v in cell if abs(np.hypot(*(v - ps[k])) - np.hypot(*(v - e))) < 1e-6 * max(1.0, np.hypot(*(v - e)))
+        ]
         fields = {"game": "pursuit", "region_of": self.evader, "value": float(_shoelace(cell)) if len(cell) else 0.0}
         if np.any(heading):
             fields["heading"] = _bearing(heading)
@@ -292,9 +315,10 @@ class ReachAvoidAdvisor:
     ``value`` is the time to the last target along it. Solved on a grid of
     ``spacing`` metres on each new fix of the attacker."""
 
-    def __init__(self, game_map: Map, *, attacker: str, defenders, targets, speeds: dict, capture_radius: float,
-                 spacing: float) -> None:  # fmt: skip
-        from maps import rasterize
+    def __init__(
+        self, game_map: Map, *, attacker: str, defenders, targets, speeds: dict, capture_radius: float, spacing: float
+    ) -> None:
+        from bearcat.maps import rasterize
 
         self.map = game_map
         self.attacker, self.defenders = attacker, tuple(defenders)
@@ -329,11 +353,11 @@ class ReachAvoidAdvisor:
         return self._last[1]
 
     def _answer(self, points) -> dict:
-        from solvers.openloop import Defender, solve_openloop
+        from bearcat.solvers.openloop import Defender, solve_openloop
 
         a, *others = (self._placeable(p) for p in points)
         defenders = [Defender(tuple(p), self.speed[d], self.capture_radius) for d, p in zip(self.defenders, others)]
-        masks = self.masks[self.stage:]
+        masks = self.masks[self.stage :]
         try:
             solution = solve_openloop(self.grid, tuple(a), [self.speed[self.attacker]] * len(masks), masks, defenders)
         except InputError as exc:
@@ -355,7 +379,6 @@ class ReachAvoidAdvisor:
         if self.free[self.grid.nearest_index(p)]:
             return p
         return np.asarray(shapely.ops.nearest_points(self._inside, shapely.Point(p))[0].coords[0])
-
 
 
 class SearchAdvisor:
@@ -401,7 +424,10 @@ class SearchAdvisor:
         """P_D's outlines, redrawn only when the tasker updated it (once a second)."""
         picture = self.tasker.picture
         if picture.updates != self._drawn[0]:
-            self._drawn = (picture.updates, _geodetic_rings(self.ctf.map, _mask_rings(self.tasker.grid, picture.possible)))
+            self._drawn = (
+                picture.updates,
+                _geodetic_rings(self.ctf.map, _mask_rings(self.tasker.grid, picture.possible)),
+            )
         return self._drawn[1]
 
 

@@ -15,8 +15,8 @@ from pathlib import Path
 
 import msgspec
 
-from bus.messages import Message
-from netem.shim import Impairment
+from bearcat.bus.messages import Message
+from bearcat.netem.shim import Impairment
 
 
 class EventLog:
@@ -28,7 +28,7 @@ class EventLog:
         self._file = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "w", encoding="utf-8")
+            self._file = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 (open for the log's lifetime)
 
     def sent(self, t: float, sender: str, key: str, message: Message) -> None:
         self._write({"event": "sent", "t": t, "sender": sender, "key": key, "message": msgspec.to_builtins(message)})
@@ -40,11 +40,19 @@ class EventLog:
         self._write({"event": "refused", "t": t, "sender": sender, "receiver": receiver, "key": key, "reason": reason})
 
     def impaired(self, record: Impairment) -> None:
-        self._write({
-            "event": "impaired", "t": record.sent, "sender": record.sender, "receiver": record.receiver,
-            "key": record.key, "size": record.size, "action": record.action,
-            "delay": record.delay, "reasons": list(record.reasons),
-        })  # fmt: skip
+        self._write(
+            {
+                "event": "impaired",
+                "t": record.sent,
+                "sender": record.sender,
+                "receiver": record.receiver,
+                "key": record.key,
+                "size": record.size,
+                "action": record.action,
+                "delay": record.delay,
+                "reasons": list(record.reasons),
+            }
+        )
 
     def note(self, t: float, what: str, **fields) -> None:
         self._write({"event": what, "t": t, **fields})

@@ -24,8 +24,8 @@ from pathlib import Path
 
 import numpy as np
 
-from agents.ground_station.recorder import read_events
-from maps import Map
+from bearcat.agents.ground_station.recorder import read_events
+from bearcat.maps import Map
 
 log = logging.getLogger(__name__)
 
@@ -35,7 +35,7 @@ COLOURS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (255, 127, 14), (148, 1
 def finish_run(directory: str | Path, game_map: Map, name: str) -> Path | None:
     """Write a run directory's ``map.geojson`` and, from its ``events.jsonl``,
     its ``recording.rrd``; the recording's path (None without rerun-sdk)."""
-    from maps import write_geojson
+    from bearcat.maps import write_geojson
 
     directory = Path(directory)
     write_geojson(game_map, directory / "map.geojson", units="metres")
@@ -69,18 +69,38 @@ def write_recording(events_path: str | Path, game_map: Map, rrd_path: str | Path
         if kind == "sent":
             m = e["message"]
             if m["type"] == "truth":
-                rec.log(f"ground/truth/{m['agent']}", rr.Points2D([to_local(m["lat"], m["lon"])], radii=0.6,
-                        colors=[colour_of(m["agent"])], labels=[m["agent"]]))  # fmt: skip
+                rec.log(
+                    f"ground/truth/{m['agent']}",
+                    rr.Points2D(
+                        [to_local(m["lat"], m["lon"])], radii=0.6, colors=[colour_of(m["agent"])], labels=[m["agent"]]
+                    ),
+                )
             elif m["type"] == "state":
-                rec.log("game/state", rr.TextLog(f"{m['phase']}: {m.get('winner') or ''} {m.get('reason', '')}".strip()))
+                rec.log(
+                    "game/state", rr.TextLog(f"{m['phase']}: {m.get('winner') or ''} {m.get('reason', '')}".strip())
+                )
             elif m["type"] == "fix" and e["sender"] != "launcher":
                 _log_fix(rec, rr, m, to_local, colour_of)
             elif m["type"] == "uav-task":
-                rec.log(f"ground/uav/{m['uav']}/target", rr.Points2D([to_local(m["lat"], m["lon"])], radii=1.5,
-                        colors=[colour_of(m["uav"])], labels=[f"{m['uav']} {m['kind']}"]))  # fmt: skip
+                rec.log(
+                    f"ground/uav/{m['uav']}/target",
+                    rr.Points2D(
+                        [to_local(m["lat"], m["lon"])],
+                        radii=1.5,
+                        colors=[colour_of(m["uav"])],
+                        labels=[f"{m['uav']} {m['kind']}"],
+                    ),
+                )
             elif m["type"] == "detection":
-                rec.log(f"ground/uav/{m['uav']}/detection", rr.Points2D([to_local(m["lat"], m["lon"])], radii=2.0,
-                        colors=[(255, 200, 0)], labels=[f"{m['agent']} seen by {m['uav']}"]))  # fmt: skip
+                rec.log(
+                    f"ground/uav/{m['uav']}/detection",
+                    rr.Points2D(
+                        [to_local(m["lat"], m["lon"])],
+                        radii=2.0,
+                        colors=[(255, 200, 0)],
+                        labels=[f"{m['agent']} seen by {m['uav']}"],
+                    ),
+                )
         elif kind == "received":
             m = sent.get((e["key"], e.get("seq")))
             if m is None:
@@ -103,7 +123,9 @@ def _converter(game_map: Map):
 
 
 def _log_map(rec, rr, game_map: Map) -> None:
-    rec.log("map/area", rr.LineStrips2D([np.asarray(game_map.area.exterior.coords)], colors=[(90, 90, 90)]), static=True)
+    rec.log(
+        "map/area", rr.LineStrips2D([np.asarray(game_map.area.exterior.coords)], colors=[(90, 90, 90)]), static=True
+    )
     if game_map.obstacles:
         rings = [np.asarray(o.exterior.coords) for o in game_map.obstacles]
         rec.log("map/buildings", rr.LineStrips2D(rings, colors=[(60, 60, 60)], radii=0.3), static=True)
@@ -114,8 +136,10 @@ def _log_map(rec, rr, game_map: Map) -> None:
 
 
 def _log_fix(rec, rr, m, to_local, colour_of) -> None:
-    rec.log(f"ground/fix/{m['agent']}", rr.Points2D([to_local(m["lat"], m["lon"])], radii=0.4,
-            colors=[colour_of(m["agent"])]))  # fmt: skip
+    rec.log(
+        f"ground/fix/{m['agent']}",
+        rr.Points2D([to_local(m["lat"], m["lon"])], radii=0.4, colors=[colour_of(m["agent"])]),
+    )
 
 
 def _log_screen(rec, rr, m, to_local, colour_of) -> None:
@@ -125,18 +149,27 @@ def _log_screen(rec, rr, m, to_local, colour_of) -> None:
     rec.log(f"{base}/region", rr.LineStrips2D(rings, colors=[(230, 60, 160)]) if rings else rr.Clear(recursive=False))
     possible = [np.array([to_local(lat, lon) for lat, lon in ring]) for ring in m.get("possible", []) if ring]
     if possible or m.get("game") == "search":
-        rec.log(f"{base}/possible", rr.LineStrips2D(possible, colors=[(255, 140, 0)]) if possible else rr.Clear(recursive=False))
+        rec.log(
+            f"{base}/possible",
+            rr.LineStrips2D(possible, colors=[(255, 140, 0)]) if possible else rr.Clear(recursive=False),
+        )
     if m.get("seen_by"):
         rec.log(f"{base}/alert", rr.TextLog(f"{agent} seen by {', '.join(m['seen_by'])}"))
     reports = m.get("reports", [])
     if reports:
         points = [to_local(r["lat"], r["lon"]) for r in reports]
-        rec.log(f"{base}/agents", rr.Points2D(points, radii=0.5, labels=[r["agent"] for r in reports],
-                colors=[colour_of(r["agent"]) for r in reports]))  # fmt: skip
+        rec.log(
+            f"{base}/agents",
+            rr.Points2D(
+                points, radii=0.5, labels=[r["agent"] for r in reports], colors=[colour_of(r["agent"]) for r in reports]
+            ),
+        )
         me = next((p for p, r in zip(points, reports) if r["agent"] == agent), None)
         if me is not None and m.get("heading") is not None:
             b = np.radians(m["heading"])
-            rec.log(f"{base}/heading", rr.Arrows2D(origins=[me], vectors=[(4 * np.sin(b), 4 * np.cos(b))],
-                    colors=[colour_of(agent)]))  # fmt: skip
+            rec.log(
+                f"{base}/heading",
+                rr.Arrows2D(origins=[me], vectors=[(4 * np.sin(b), 4 * np.cos(b))], colors=[colour_of(agent)]),
+            )
     if m.get("value") is not None:
         rec.log(f"game/value/{agent}", rr.Scalars(m["value"]))

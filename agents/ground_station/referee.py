@@ -23,11 +23,11 @@ from dataclasses import dataclass
 import numpy as np
 import shapely
 
-from agents.protocol import Send
-from bus import keys
-from bus.messages import Control, Fix, GameState, Message, Truth
-from maps import Map
-from solvers.pursuit_game import first_contact
+from bearcat.agents.protocol import Send
+from bearcat.bus import keys
+from bearcat.bus.messages import Control, Fix, GameState, Message, Truth
+from bearcat.maps import Map
+from bearcat.solvers.pursuit_game import first_contact
 
 STATE_EVERY = 1.0  # s between state messages when nothing changes
 
@@ -168,8 +168,14 @@ class Referee:
         self.seq += 1
         elapsed = 0.0 if self.started_at is None else (self.ended_at or now) - self.started_at
         state = GameState(
-            seq=self.seq, t=now, phase=self.phase, elapsed=max(elapsed, 0.0), winner=self.winner,
-            reason=self.reason[:200], flag_holder=self.flag_holder, captured=self.captured[:64],
+            seq=self.seq,
+            t=now,
+            phase=self.phase,
+            elapsed=max(elapsed, 0.0),
+            winner=self.winner,
+            reason=self.reason[:200],
+            flag_holder=self.flag_holder,
+            captured=self.captured[:64],
             judged_on="truth" if self.on_truth else "fixes",
-        )  # fmt: skip
+        )
         return Send(keys.state(self.game), state)

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from maps import Map
+from bearcat.maps import Map
 
 
 class Sight:

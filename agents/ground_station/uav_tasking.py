@@ -26,14 +26,14 @@ import shapely
 import shapely.ops
 from scipy.interpolate import RegularGridInterpolator
 
-from agents.protocol import Send
-from bus import keys
-from bus.messages import Detection, Fix, GameState, Message, UavTask
-from maps import Map
-from maps.raster import rasterize
-from solvers import search
-from solvers.ctf_guidance import Guidance as CtfGuidance
-from solvers.errors import InputError
+from bearcat.agents.protocol import Send
+from bearcat.bus import keys
+from bearcat.bus.messages import Detection, Fix, GameState, Message, UavTask
+from bearcat.maps import Map
+from bearcat.maps.raster import rasterize
+from bearcat.solvers import search
+from bearcat.solvers.ctf_guidance import Guidance as CtfGuidance
+from bearcat.solvers.errors import InputError
 
 PERIOD = 1.0  # s between updates and tasks
 TRACK_FOR = 3.0  # s the UAV keeps tracking the defender's last sighting
@@ -200,9 +200,18 @@ class UavTasker:
         possible = self.possible.mask & ~seen_q
         if self.strategy == "reachability":
             found = search.search_target(
-                self.terrain, self.grid, possible, seen_a, seen_q, self._defender_wins(a), attacker=a, uav=at,
-                defender_speed=self.defender_speed, uav_speed=u.speed, uav_radius=u.camera_radius,
-            )  # fmt: skip
+                self.terrain,
+                self.grid,
+                possible,
+                seen_a,
+                seen_q,
+                self._defender_wins(a),
+                attacker=a,
+                uav=at,
+                defender_speed=self.defender_speed,
+                uav_speed=u.speed,
+                uav_radius=u.camera_radius,
+            )
             return found.target, found.tier
         if self.strategy == "nearest":
             return search.nearest_unobserved(self.grid, possible, at), None

@@ -15,12 +15,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from agents.human.behaviours import Situation
-from agents.human.phone import Phone
-from agents.human.walker import Walker
-from agents.protocol import Send
-from bus import keys
-from bus.messages import Control, GameState, Guidance, Message, Truth
+from bearcat.agents.human.behaviours import Situation
+from bearcat.agents.human.phone import Phone
+from bearcat.agents.human.walker import Walker
+from bearcat.agents.protocol import Send
+from bearcat.bus import keys
+from bearcat.bus.messages import Control, GameState, Guidance, Message, Truth
 
 TICK = 0.1  # s: the body's integration step and decision rate
 

@@ -33,8 +33,8 @@ import numpy as np
 import shapely
 import shapely.ops
 
-from agents.human.phone import Screen
-from agents.navigation import Navigator
+from bearcat.agents.human.phone import Screen
+from bearcat.agents.navigation import Navigator
 
 ARRIVED = 1.0  # metres: close enough to a waypoint or hold point
 
@@ -141,7 +141,12 @@ class FakeOut:
         if self.went_at is None:
             defender = _nearest_opponent(me, screen, situation)
             clear = screen.value is not None and screen.value <= -self.margin
-            if defender is not None and screen.region_of is not None and not screen.in_region(defender.position) and clear:
+            if (
+                defender is not None
+                and screen.region_of is not None
+                and not screen.in_region(defender.position)
+                and clear
+            ):
                 self.went_at = now
         if self.went_at is not None:
             return screen.heading
@@ -179,8 +184,11 @@ class GoNoGo:
                 self.committed_at = now
         if self.committed_at is not None:
             return screen.heading if screen.heading is not None else situation.navigator.toward(situation.goal, me)
-        near = [o for o in situation.opponents if screen.age(o, now) <= self.fresh
-                and np.hypot(*(screen.reports[o].position - me)) <= self.flee]  # fmt: skip
+        near = [
+            o
+            for o in situation.opponents
+            if screen.age(o, now) <= self.fresh and np.hypot(*(screen.reports[o].position - me)) <= self.flee
+        ]
         if near:
             return _flee(me, screen, situation)
         if np.hypot(*(self.hold - me)) <= ARRIVED:
@@ -238,10 +246,17 @@ class Patrol:
 
 
 KEYS = {
-    "up": (0.0, 1.0), "w": (0.0, 1.0), "down": (0.0, -1.0), "s": (0.0, -1.0),
-    "left": (-1.0, 0.0), "a": (-1.0, 0.0), "right": (1.0, 0.0), "d": (1.0, 0.0),
-    "space": None, "x": None,
-}  # fmt: skip
+    "up": (0.0, 1.0),
+    "w": (0.0, 1.0),
+    "down": (0.0, -1.0),
+    "s": (0.0, -1.0),
+    "left": (-1.0, 0.0),
+    "a": (-1.0, 0.0),
+    "right": (1.0, 0.0),
+    "d": (1.0, 0.0),
+    "space": None,
+    "x": None,
+}
 
 
 class Keyboard:

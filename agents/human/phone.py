@@ -17,9 +17,9 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 
-from bus.messages import Fix, Guidance
-from maps import Map
-from netem.models import CompassError, CompassTrack, GpsError, GpsTrack
+from bearcat.bus.messages import Fix, Guidance
+from bearcat.maps import Map
+from bearcat.netem.models import CompassError, CompassTrack, GpsError, GpsTrack
 
 
 @dataclass(frozen=True)
@@ -103,9 +103,14 @@ class Phone:
         reading = math.degrees(self.compass.reading(self._heading)) % 360.0
         self.seq += 1
         return Fix(
-            agent=self.agent, seq=self.seq, t=now, lat=lat, lon=lon, heading=reading if reading < 360.0 else 0.0,
+            agent=self.agent,
+            seq=self.seq,
+            t=now,
+            lat=lat,
+            lon=lon,
+            heading=reading if reading < 360.0 else 0.0,
             accuracy=self.gps.model.horizontal_sigma(near <= self.gps.model.urban_distance),
-        )  # fmt: skip
+        )
 
     def show(self, guidance: Guidance, now: float) -> None:
         """Put a guidance message on the screen (an older one than shown is ignored)."""

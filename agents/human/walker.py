@@ -19,7 +19,7 @@ from collections import deque
 import numpy as np
 import shapely
 
-from maps import Map
+from bearcat.maps import Map
 
 HEADING_TAU = 3.0  # s, correlation time of the heading error
 

@@ -5,7 +5,8 @@ On the start command it takes off to its altitude; each task from the
 ground station sends it somewhere (a search target or a waypoint), holds
 it or lands it. It ``steer``s there by ``goto`` (the autopilot flies to the
 point) or by ``velocity`` (offboard velocity setpoints ten times a second
-on a braking curve toward the point, the way a companion computer steers). Its telemetry goes out as fixes on its own fix key, so the
+on a braking curve toward the point, the way a companion computer steers).
+Its telemetry goes out as fixes on its own fix key, so the
 ground station and the phones see it like any agent. Its camera sees a
 disk of radius ``r_q`` on the ground (V_Q of 6.2.2): an opponent whose
 true position lies in it while the UAV flies is reported as a detection
@@ -25,11 +26,11 @@ import math
 
 import numpy as np
 
-from agents.protocol import Send
-from agents.uav.autopilot import Autopilot, VehicleState
-from bus import keys
-from bus.messages import Control, Detection, Fix, GameState, Message, Truth, UavTask
-from maps.geodesy import to_local
+from bearcat.agents.protocol import Send
+from bearcat.agents.uav.autopilot import Autopilot, VehicleState
+from bearcat.bus import keys
+from bearcat.bus.messages import Control, Detection, Fix, GameState, Message, Truth, UavTask
+from bearcat.maps.geodesy import to_local
 
 FAILSAFES = ("hold", "return", "land")
 STEERING = ("goto", "velocity")
@@ -70,9 +71,11 @@ class UavAgent:
         self.truth = truth
         self.period = 0.1
         self.subscriptions = (
-            keys.uav_task(game, name), keys.state(game), keys.control(game),
+            keys.uav_task(game, name),
+            keys.state(game),
+            keys.control(game),
             *(keys.truth(game, agent) for agent in watch),
-        )  # fmt: skip
+        )
         self.watches = (keys.every(game, "alive"),)
         self.state: VehicleState | None = None
         self.flying = False  # took off and not told to land

@@ -50,7 +50,7 @@ class Body:
     battery: float = 1.0  # fraction of charge left
 
     @classmethod
-    def at_rest(cls, x: float = 0.0, y: float = 0.0) -> "Body":
+    def at_rest(cls, x: float = 0.0, y: float = 0.0) -> Body:
         return cls(np.array([x, y, 0.0]), np.zeros(3))
 
 

@@ -21,9 +21,9 @@ from typing import Protocol
 
 import numpy as np
 
-from agents.uav.airframe import Airframe
-from agents.uav.flight import Flight, Main, Sub
-from maps.geodesy import to_geodetic, to_local
+from bearcat.agents.uav.airframe import Airframe
+from bearcat.agents.uav.flight import Flight, Main, Sub
+from bearcat.maps.geodesy import to_geodetic, to_local
 
 log = logging.getLogger("bearcat.uav")
 
@@ -62,17 +62,23 @@ class Autopilot(Protocol):
 
 
 MODE_NAMES = {
-    (Main.AUTO, Sub.READY): "ready", (Main.AUTO, Sub.TAKEOFF): "takeoff", (Main.AUTO, Sub.LOITER): "hold",
-    (Main.AUTO, Sub.MISSION): "mission", (Main.AUTO, Sub.RTL): "return", (Main.AUTO, Sub.LAND): "land",
-}  # fmt: skip
+    (Main.AUTO, Sub.READY): "ready",
+    (Main.AUTO, Sub.TAKEOFF): "takeoff",
+    (Main.AUTO, Sub.LOITER): "hold",
+    (Main.AUTO, Sub.MISSION): "mission",
+    (Main.AUTO, Sub.RTL): "return",
+    (Main.AUTO, Sub.LAND): "land",
+}
 
 
 class SimulatedAutopilot:
     """PX4's flight modes in-process, ``home`` = (lat, lon) of the take-off point."""
 
-    def __init__(self, home: tuple[float, float], *, airframe: Airframe = Airframe(), rng: np.random.Generator) -> None:
+    def __init__(
+        self, home: tuple[float, float], *, airframe: Airframe | None = None, rng: np.random.Generator
+    ) -> None:
         self.home = (float(home[0]), float(home[1]))
-        self.flight = Flight(airframe, rng)
+        self.flight = Flight(airframe or Airframe(), rng)
         self.failure: str | None = None
         self._now: float | None = None
 
@@ -150,9 +156,9 @@ class MavsdkAutopilot:
         self.action, self.telemetry, self.offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
         self._queue = asyncio.Queue()
         self._tasks = [asyncio.create_task(self._work())] + [
-            asyncio.create_task(self._follow(name)) for name in ("position", "velocity_ned", "armed", "in_air",
-                                                                  "flight_mode", "battery")
-        ]  # fmt: skip
+            asyncio.create_task(self._follow(name))
+            for name in ("position", "velocity_ned", "armed", "in_air", "flight_mode", "battery")
+        ]
 
     async def _system(self, timeout: float):
         if self.sysid is None:
@@ -185,10 +191,16 @@ class MavsdkAutopilot:
         battery = s.get("battery")
         mode = s.get("flight_mode")
         return VehicleState(
-            p.latitude_deg, p.longitude_deg, p.relative_altitude_m, speed, heading, bool(s.get("armed", False)),
-            bool(s.get("in_air", False)), "unknown" if mode is None else mode.name.lower().replace("_", "-"),
+            p.latitude_deg,
+            p.longitude_deg,
+            p.relative_altitude_m,
+            speed,
+            heading,
+            bool(s.get("armed", False)),
+            bool(s.get("in_air", False)),
+            "unknown" if mode is None else mode.name.lower().replace("_", "-"),
             1.0 if battery is None or battery.remaining_percent is None else battery.remaining_percent / 100.0,
-        )  # fmt: skip
+        )
 
     def take_off(self, altitude: float) -> None:
         self._do("take off", self.action.set_takeoff_altitude, float(altitude))
@@ -265,8 +277,12 @@ def _route_mavsdk_logs() -> None:
         return
     from mavsdk.logging import LogLevel, log_subscribe
 
-    levels = {LogLevel.DEBUG: logging.DEBUG, LogLevel.INFO: logging.INFO, LogLevel.WARN: logging.WARNING,
-              LogLevel.ERROR: logging.ERROR}  # fmt: skip
+    levels = {
+        LogLevel.DEBUG: logging.DEBUG,
+        LogLevel.INFO: logging.INFO,
+        LogLevel.WARN: logging.WARNING,
+        LogLevel.ERROR: logging.ERROR,
+    }
     mavsdk_log = logging.getLogger("mavsdk")
 
     def forward(level, message, file, line):

@@ -20,11 +20,11 @@ from dataclasses import dataclass
 import numpy as np
 
 os.environ.setdefault("MAVLINK20", "1")  # PX4 speaks MAVLink 2; pymavlink reads this at import
-from pymavlink import mavutil  # noqa: E402
+from pymavlink import mavutil
 
-from agents.uav.airframe import Airframe  # noqa: E402
-from agents.uav.flight import Flight  # noqa: E402
-from agents.uav.px4 import Px4Face  # noqa: E402
+from bearcat.agents.uav.airframe import Airframe
+from bearcat.agents.uav.flight import Flight
+from bearcat.agents.uav.px4 import Px4Face
 
 RATE = 50.0  # Hz of the physics and of polling the socket
 log = logging.getLogger("bearcat.vehicle")
@@ -42,7 +42,7 @@ def serve(
     sysid: int,
     home: tuple[float, float, float],
     *,
-    airframe: Airframe = Airframe(),
+    airframe: Airframe | None = None,
     start=(0.0, 0.0),
     seed: int = 0,
     stop=lambda: False,
@@ -52,7 +52,7 @@ def serve(
     ``start`` is where it stands, in metres east/north of ``home``."""
     mavutil.set_dialect("common")
     conn = mavutil.mavlink_connection(url, source_system=sysid, source_component=1, dialect="common")
-    flight = Flight(airframe, np.random.default_rng(seed), start=start)
+    flight = Flight(airframe or Airframe(), np.random.default_rng(seed), start=start)
     face = Px4Face(flight, sysid, home)
     counts = Counts()
     stopping = []

@@ -18,7 +18,7 @@ from enum import IntEnum
 
 import numpy as np
 
-from agents.uav.airframe import Airframe, Body, PointMass
+from bearcat.agents.uav.airframe import Airframe, Body, PointMass
 
 DISARM_PREFLIGHT = 10.0  # s armed on the ground before auto-disarm (COM_DISARM_PRFLT)
 DISARM_LANDED = 2.0  # s after touchdown (COM_DISARM_LAND)

@@ -22,8 +22,8 @@ import math
 
 from pymavlink.dialects.v20 import common as mav
 
-from agents.uav.flight import Flight, Main, Result
-from maps.geodesy import to_geodetic, to_local
+from bearcat.agents.uav.flight import Flight, Main, Result
+from bearcat.maps.geodesy import to_geodetic, to_local
 
 # Telemetry streams and their periods (s), PX4's defaults on a telemetry link.
 STREAMS = {
@@ -38,10 +38,14 @@ STREAMS = {
 }
 PX4_VERSION = (1 << 24) | (15 << 16) | (0 << 8) | 255  # 1.15.0 release
 HEALTH = (
-    mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
-    | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE | mav.MAV_SYS_STATUS_SENSOR_GPS
-    | mav.MAV_SYS_STATUS_SENSOR_RC_RECEIVER | mav.MAV_SYS_STATUS_PREARM_CHECK
-)  # fmt: skip
+    mav.MAV_SYS_STATUS_SENSOR_3D_GYRO
+    | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL
+    | mav.MAV_SYS_STATUS_SENSOR_3D_MAG
+    | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE
+    | mav.MAV_SYS_STATUS_SENSOR_GPS
+    | mav.MAV_SYS_STATUS_SENSOR_RC_RECEIVER
+    | mav.MAV_SYS_STATUS_PREARM_CHECK
+)
 PARAMS = {"MIS_TAKEOFF_ALT": "takeoff_alt", "RTL_RETURN_ALT": "rtl_alt"}
 FORCE = 21196  # ARM_DISARM param2 that forces a disarm in flight
 
@@ -152,9 +156,16 @@ class Px4Face:
         ve, vn, vu = b.velocity
         heading = math.degrees(math.atan2(ve, vn)) % 360.0 if math.hypot(ve, vn) > 0.2 else 0.0
         return mav.MAVLink_global_position_int_message(
-            self._ms(now), round(lat * 1e7), round(lon * 1e7), round((self.home[2] + b.position[2]) * 1000),
-            round(b.position[2] * 1000), round(vn * 100), round(ve * 100), round(-vu * 100), round(heading * 100),
-        )  # fmt: skip
+            self._ms(now),
+            round(lat * 1e7),
+            round(lon * 1e7),
+            round((self.home[2] + b.position[2]) * 1000),
+            round(b.position[2] * 1000),
+            round(vn * 100),
+            round(ve * 100),
+            round(-vu * 100),
+            round(heading * 100),
+        )
 
     def _attitude(self, now: float):
         b = self.flight.body
@@ -180,9 +191,17 @@ class Px4Face:
         lat, lon = self._geodetic(b.position[0], b.position[1])
         speed = math.hypot(b.velocity[0], b.velocity[1])
         return mav.MAVLink_gps_raw_int_message(
-            int(now * 1e6), mav.GPS_FIX_TYPE_3D_FIX, round(lat * 1e7), round(lon * 1e7),
-            round((self.home[2] + b.position[2]) * 1000), 80, 120, round(speed * 100), 65535, 14,
-        )  # fmt: skip
+            int(now * 1e6),
+            mav.GPS_FIX_TYPE_3D_FIX,
+            round(lat * 1e7),
+            round(lon * 1e7),
+            round((self.home[2] + b.position[2]) * 1000),
+            80,
+            120,
+            round(speed * 100),
+            65535,
+            14,
+        )
 
     def _home_position(self, now: float):
         lat, lon, alt = self.home
@@ -192,10 +211,12 @@ class Px4Face:
 
     def _version(self, now: float):
         capabilities = (
-            mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
-            | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
+            mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2
+            | mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT
+            | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT
+            | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED
             | mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_GLOBAL_INT
-        )  # fmt: skip
+        )
         return mav.MAVLink_autopilot_version_message(
             capabilities, PX4_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 1000 + self.sysid
         )
@@ -237,4 +258,3 @@ def _position(msg) -> tuple[float, float, float]:
     if msg.get_type() == "COMMAND_INT":
         return msg.x / 1e7, msg.y / 1e7, float(msg.z)
     return float(msg.param5), float(msg.param6), float(msg.param7)
-

@@ -16,37 +16,86 @@ from dataclasses import asdict
 from pathlib import Path
 
 from bearcat import arguments
-from maps import load_map
-from agents.ground_station.ctf_cache import CtfGame, Solved, cache_root, default_rules, load_or_solve, unresolved_capture
-from solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
-from solvers.ctf_guidance import Guidance
-from solvers.ctf_playout import play
-from solvers.hji import SCHEMES
+from bearcat.agents.ground_station.ctf_cache import (
+    CtfGame,
+    Solved,
+    cache_root,
+    default_rules,
+    load_or_solve,
+    unresolved_capture,
+)
+from bearcat.maps import load_map
+from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
+from bearcat.solvers.ctf_guidance import Guidance
+from bearcat.solvers.ctf_playout import play
+from bearcat.solvers.hji import SCHEMES
 
 DEFAULT_GRID = 45
 
 
 def add_game_options(parser: argparse.ArgumentParser) -> None:
     game = parser.add_argument_group("the game")
-    game.add_argument("--map", required=True, help="built-in map name or path to a GeoJSON map with flag and return regions")
-    game.add_argument("--grid", type=int, default=DEFAULT_GRID, metavar="N",
-                      help=f"grid points per axis of each player's position (N^4 joint states; default {DEFAULT_GRID})")
-    game.add_argument("--stages", choices=tuple(STAGES), default="both",
-                      help="return: R_A only; capture: F_A only; both: R_A and the two-stage W_A (default); all: R_A, F_A and W_A")
-    game.add_argument("--scheme", choices=tuple(SCHEMES), default="weno5",
-                      help="weno5: WENO5 + RK3 (default, accurate); first: first-order upwind (fast, diffusive)")
-    game.add_argument("--attacker-speed", type=arguments.positive, default=1.0, metavar="V",
-                      help="attacker top speed in m/s on full-speed terrain (default 1)")
-    game.add_argument("--defender-speed", type=arguments.positive, default=1.0, metavar="V",
-                      help="defender top speed in m/s on full-speed terrain (default 1)")
-    game.add_argument("--capture-radius", type=arguments.non_negative, metavar="R",
-                      help="capture radius in m (default: 5%% of the map's longer side, 0.5 on a 10 m arena)")
-    game.add_argument("--capture-time", type=arguments.positive, metavar="T",
-                      help="time allowed for flag capture in s (default: 1.2 x the longer side / the slower speed)")
-    game.add_argument("--return-time", type=arguments.positive, metavar="T",
-                      help="time allowed for flag return in s (default as --capture-time)")
-    game.add_argument("--tol", type=arguments.positive, default=DEFAULT_TOL, metavar="CELLS",
-                      help=f"convergence tolerance in cells (default {DEFAULT_TOL})")
+    game.add_argument(
+        "--map", required=True, help="built-in map name or path to a GeoJSON map with flag and return regions"
+    )
+    game.add_argument(
+        "--grid",
+        type=int,
+        default=DEFAULT_GRID,
+        metavar="N",
+        help=f"grid points per axis of each player's position (N^4 joint states; default {DEFAULT_GRID})",
+    )
+    game.add_argument(
+        "--stages",
+        choices=tuple(STAGES),
+        default="both",
+        help="return: R_A only; capture: F_A only; both: R_A and the two-stage W_A (default); all: R_A, F_A and W_A",
+    )
+    game.add_argument(
+        "--scheme",
+        choices=tuple(SCHEMES),
+        default="weno5",
+        help="weno5: WENO5 + RK3 (default, accurate); first: first-order upwind (fast, diffusive)",
+    )
+    game.add_argument(
+        "--attacker-speed",
+        type=arguments.positive,
+        default=1.0,
+        metavar="V",
+        help="attacker top speed in m/s on full-speed terrain (default 1)",
+    )
+    game.add_argument(
+        "--defender-speed",
+        type=arguments.positive,
+        default=1.0,
+        metavar="V",
+        help="defender top speed in m/s on full-speed terrain (default 1)",
+    )
+    game.add_argument(
+        "--capture-radius",
+        type=arguments.non_negative,
+        metavar="R",
+        help="capture radius in m (default: 5%% of the map's longer side, 0.5 on a 10 m arena)",
+    )
+    game.add_argument(
+        "--capture-time",
+        type=arguments.positive,
+        metavar="T",
+        help="time allowed for flag capture in s (default: 1.2 x the longer side / the slower speed)",
+    )
+    game.add_argument(
+        "--return-time",
+        type=arguments.positive,
+        metavar="T",
+        help="time allowed for flag return in s (default as --capture-time)",
+    )
+    game.add_argument(
+        "--tol",
+        type=arguments.positive,
+        default=DEFAULT_TOL,
+        metavar="CELLS",
+        help=f"convergence tolerance in cells (default {DEFAULT_TOL})",
+    )
     game.add_argument("--no-cache", action="store_true", help="solve afresh and store nothing")
 
 
@@ -75,11 +124,20 @@ def register(subparsers) -> None:
     )
     add_game_options(q)
     _add_state_options(q)
-    q.add_argument("--phase", choices=("capture", "return"),
-                   help="capture: the attacker has not taken the flag; return: it has (default: the first stage solved)")
+    q.add_argument(
+        "--phase",
+        choices=("capture", "return"),
+        help="capture: the attacker has not taken the flag; return: it has (default: the first stage solved)",
+    )
     q.add_argument("--plot", type=Path, metavar="PNG", help="draw the state and both players' opponent regions")
-    q.add_argument("--json", type=Path, nargs="?", const=Path("-"), metavar="FILE",
-                   help="write the answer as JSON (to stdout without FILE)")
+    q.add_argument(
+        "--json",
+        type=Path,
+        nargs="?",
+        const=Path("-"),
+        metavar="FILE",
+        help="write the answer as JSON (to stdout without FILE)",
+    )
     q.set_defaults(run=run_query)
 
     playing = subparsers.add_parser("play", help="play a solved game out in closed loop")
@@ -93,8 +151,14 @@ def register(subparsers) -> None:
     add_game_options(p)
     _add_state_options(p)
     p.add_argument("--plot", type=Path, metavar="PNG", help="draw the start's winning region and both tracks")
-    p.add_argument("--json", type=Path, nargs="?", const=Path("-"), metavar="FILE",
-                   help="write the tracks and outcome as JSON (to stdout without FILE)")
+    p.add_argument(
+        "--json",
+        type=Path,
+        nargs="?",
+        const=Path("-"),
+        metavar="FILE",
+        help="write the tracks and outcome as JSON (to stdout without FILE)",
+    )
     p.set_defaults(run=run_play)
 
 
@@ -106,9 +170,13 @@ def _add_state_options(parser) -> None:
 def game_from_args(args) -> CtfGame:
     game_map = load_map(args.map)
     rules = default_rules(
-        game_map, args.attacker_speed, args.defender_speed,
-        capture_radius=args.capture_radius, capture_time=args.capture_time, return_time=args.return_time,
-    )  # fmt: skip
+        game_map,
+        args.attacker_speed,
+        args.defender_speed,
+        capture_radius=args.capture_radius,
+        capture_time=args.capture_time,
+        return_time=args.return_time,
+    )
     if args.grid < 9:
         raise arguments.UsageError(f"--grid {args.grid} is too coarse; use at least 9 points per axis")
     coarse = unresolved_capture(game_map, args.grid, rules.capture_radius)
@@ -137,9 +205,14 @@ def solve_game(args) -> tuple[CtfGame, Solved, float]:
         if bar is None:
             for finished in bars.values():
                 finished.close()
-            bar = bars[name] = tqdm(total=round(horizon, 2), desc=f"{SET_NAMES[name]} ", unit="s", file=sys.stderr,
-                                    bar_format="{desc}{percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s game time "
-                                    "[{elapsed}<{remaining}{postfix}]")  # fmt: skip
+            bar = bars[name] = tqdm(
+                total=round(horizon, 2),
+                desc=f"{SET_NAMES[name]} ",
+                unit="s",
+                file=sys.stderr,
+                bar_format="{desc}{percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s game time "
+                "[{elapsed}<{remaining}{postfix}]",
+            )
         bar.update(round(t - bar.n, 2))
         bar.set_postfix_str(f"change {change:.3g} m")
 
@@ -159,24 +232,28 @@ def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
     joint_free = free[:, :, None, None] & free[None, None, :, :]
     for name, found in solved.solution.sets.items():
         wins = (found.value <= 0) & joint_free
-        rows.append({
-            "set": SET_NAMES[name],
-            "attacker_wins_fraction": round(float(wins.sum() / joint_free.sum()), 4),
-            "converged": found.converged,
-            "converged_at_s": found.converged_at,
-            "horizon_s": game.rules.return_time if name == "return" else game.rules.capture_time,
-            "steps": found.steps,
-            "source": solved.sources[name],
-            "file": str(solved.paths[name]) if name in solved.paths else None,
-        })  # fmt: skip
+        rows.append(
+            {
+                "set": SET_NAMES[name],
+                "attacker_wins_fraction": round(float(wins.sum() / joint_free.sum()), 4),
+                "converged": found.converged,
+                "converged_at_s": found.converged_at,
+                "horizon_s": game.rules.return_time if name == "return" else game.rules.capture_time,
+                "steps": found.steps,
+                "source": solved.sources[name],
+                "file": str(solved.paths[name]) if name in solved.paths else None,
+            }
+        )
     return rows
 
 
 def run_solve(args) -> int:
     game, solved, seconds = solve_game(args)
     rules, n = game.rules, game.grid_points
-    print(f"capture-the-flag on {game.map.name}: {n}^4 = {n**4:,} joint states, {game.scheme}, "
-          f"speeds {rules.attacker_speed:g}/{rules.defender_speed:g} m/s, capture radius {rules.capture_radius:g} m")  # fmt: skip
+    print(
+        f"capture-the-flag on {game.map.name}: {n}^4 = {n**4:,} joint states, {game.scheme}, "
+        f"speeds {rules.attacker_speed:g}/{rules.defender_speed:g} m/s, capture radius {rules.capture_radius:g} m"
+    )
     rows = set_summary(game, solved)
     for row in rows:
         if row["source"] == "cache":
@@ -184,15 +261,26 @@ def run_solve(args) -> int:
         elif row["converged"]:
             how = f"converged at {row['converged_at_s']:.1f} s of game time, {row['steps']} steps"
         else:
-            how = (f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
-                   f"{row['horizon_s']:g} s game; longer stage times approach the unlimited one")
-        print(f"{row['set']}: attacker wins from {100 * row['attacker_wins_fraction']:.1f}% of free joint states; {how}")
+            how = (
+                f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
+                f"{row['horizon_s']:g} s game; longer stage times approach the unlimited one"
+            )
+        print(
+            f"{row['set']}: attacker wins from {100 * row['attacker_wins_fraction']:.1f}% of free joint states; {how}"
+        )
     print(f"{seconds:.2f} s wall; cache {cache_root()}")
     if args.json is not None:
-        _write_json(args.json, {
-            "map": game.map.name, "grid": n, "scheme": game.scheme, "rules": asdict(rules),
-            "sets": rows, "seconds": round(seconds, 3),
-        })  # fmt: skip
+        _write_json(
+            args.json,
+            {
+                "map": game.map.name,
+                "grid": n,
+                "scheme": game.scheme,
+                "rules": asdict(rules),
+                "sets": rows,
+                "seconds": round(seconds, 3),
+            },
+        )
     return 0
 
 
@@ -204,7 +292,7 @@ def bearing_deg(heading) -> float | None:
 
 
 def run_query(args) -> int:
-    game, solved, seconds = solve_game(args)
+    game, solved, _seconds = solve_game(args)
     guidance = Guidance(solved.solution)
     phase = args.phase or ("return" if args.stages == "return" else "capture")
     report = guidance.evaluate(args.attacker, args.defender, phase)
@@ -226,14 +314,18 @@ def run_query(args) -> int:
         "defender_region_area_m2": round(defender_polygons.area, 2),
         "attacker_region_area_m2": round(attacker_polygons.area, 2),
     }
-    print(f"{report.winner} wins ({name}, {phase} phase): value {report.value:+.3f} m "
-          f"({'attacker margin' if report.value <= 0 else 'defender margin'} {abs(report.value):.3f} m)")  # fmt: skip
+    print(
+        f"{report.winner} wins ({name}, {phase} phase): value {report.value:+.3f} m "
+        f"({'attacker margin' if report.value <= 0 else 'defender margin'} {abs(report.value):.3f} m)"
+    )
     for who in ("attacker", "defender"):
         h = answer[f"{who}_heading"]
         text = "none (the value is flat here)" if h is None else f"{h['bearing_deg']:.1f} deg from north"
         print(f"{who} optimal heading: {text}")
-    print(f"defender's winning region for this attacker position: {answer['defender_region_area_m2']:.1f} m^2; "
-          f"attacker's for this defender position: {answer['attacker_region_area_m2']:.1f} m^2")  # fmt: skip
+    print(
+        f"defender's winning region for this attacker position: {answer['defender_region_area_m2']:.1f} m^2; "
+        f"attacker's for this defender position: {answer['attacker_region_area_m2']:.1f} m^2"
+    )
     if args.json is not None:
         answer["regions"] = {
             "defender": _polygons_json(defender_polygons),
@@ -243,8 +335,9 @@ def run_query(args) -> int:
     if args.plot is not None:
         from bearcat.figures import ctf_query_figure
 
-        fig = ctf_query_figure(game.map, guidance, args.attacker, args.defender, report, phase,
-                               defender_values, attacker_values, name)  # fmt: skip
+        fig = ctf_query_figure(
+            game.map, guidance, args.attacker, args.defender, report, phase, defender_values, attacker_values, name
+        )
         fig.savefig(args.plot, dpi=110)
         print(f"wrote {args.plot}")
     return 0
@@ -259,14 +352,21 @@ def run_play(args) -> int:
     flag = "" if outcome.flag_time is None else f", flag taken at {outcome.flag_time:.2f} s"
     print(f"{outcome.winner} won ({outcome.reason}) after {outcome.duration:.2f} s{flag}")
     if args.json is not None:
-        _write_json(args.json, {
-            "map": game.map.name, "predicted_winner": start.winner, "value_m": round(start.value, 4),
-            "winner": outcome.winner, "reason": outcome.reason, "duration_s": round(outcome.duration, 3),
-            "flag_time_s": None if outcome.flag_time is None else round(outcome.flag_time, 3),
-            "times_s": [round(float(t), 3) for t in outcome.times],
-            "attacker": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.attacker],
-            "defender": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.defender],
-        })  # fmt: skip
+        _write_json(
+            args.json,
+            {
+                "map": game.map.name,
+                "predicted_winner": start.winner,
+                "value_m": round(start.value, 4),
+                "winner": outcome.winner,
+                "reason": outcome.reason,
+                "duration_s": round(outcome.duration, 3),
+                "flag_time_s": None if outcome.flag_time is None else round(outcome.flag_time, 3),
+                "times_s": [round(float(t), 3) for t in outcome.times],
+                "attacker": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.attacker],
+                "defender": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.defender],
+            },
+        )
     if args.plot is not None:
         from bearcat.figures import ctf_play_figure
 

@@ -17,9 +17,9 @@ from dataclasses import asdict
 from pathlib import Path
 
 from bearcat import arguments
-from maps import list_maps
-from scenarios.batch import BatchInterrupted, run_batch
-from scenarios.pursuit_experiment import PursuitSetup, run_trial, summarise, trial_tasks
+from bearcat.maps import list_maps
+from bearcat.scenarios.batch import BatchInterrupted, run_batch
+from bearcat.scenarios.pursuit_experiment import PursuitSetup, run_trial, summarise, trial_tasks
 
 DEFAULT_DOMAINS = ("square-10", "triangle-10", "maze-10")
 
@@ -34,20 +34,44 @@ def register(subparsers) -> None:
         "farthest-point evader and tabulates how often area pursuit captures sooner. Resumes an interrupted "
         "run in the same --out directory without redoing finished trials.",
     )
-    p.add_argument("--domain", nargs="+", default=list(DEFAULT_DOMAINS), metavar="MAP",
-                   help="maps to play on (default: square-10 triangle-10 maze-10)")
-    p.add_argument("--pursuers", nargs="+", type=int, default=[1, 2, 3], metavar="N", help="pursuer counts (default 1 2 3)")
-    p.add_argument("--trials", type=int, default=500, metavar="K", help="trials per domain and pursuer count (default 500)")
+    p.add_argument(
+        "--domain",
+        nargs="+",
+        default=list(DEFAULT_DOMAINS),
+        metavar="MAP",
+        help="maps to play on (default: square-10 triangle-10 maze-10)",
+    )
+    p.add_argument(
+        "--pursuers", nargs="+", type=int, default=[1, 2, 3], metavar="N", help="pursuer counts (default 1 2 3)"
+    )
+    p.add_argument(
+        "--trials", type=int, default=500, metavar="K", help="trials per domain and pursuer count (default 500)"
+    )
     p.add_argument("--seed", type=int, default=0, help="seed of the whole run (default 0)")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the trials on this Dask cluster instead")
-    p.add_argument("--out", type=Path, default=Path("pursuit-experiment"), metavar="DIR",
-                   help="run directory (default ./pursuit-experiment)")
-    p.add_argument("--dt", type=arguments.positive, default=PursuitSetup.dt, help=f"time step (default {PursuitSetup.dt})")
-    p.add_argument("--max-time", type=arguments.positive, default=PursuitSetup.max_time,
-                   help=f"longest chase in time units (default {PursuitSetup.max_time:g})")
-    p.add_argument("--gradient", choices=("boundary", "finite"), default=PursuitSetup.gradient,
-                   help="area gradient in non-convex domains (default boundary)")
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=Path("pursuit-experiment"),
+        metavar="DIR",
+        help="run directory (default ./pursuit-experiment)",
+    )
+    p.add_argument(
+        "--dt", type=arguments.positive, default=PursuitSetup.dt, help=f"time step (default {PursuitSetup.dt})"
+    )
+    p.add_argument(
+        "--max-time",
+        type=arguments.positive,
+        default=PursuitSetup.max_time,
+        help=f"longest chase in time units (default {PursuitSetup.max_time:g})",
+    )
+    p.add_argument(
+        "--gradient",
+        choices=("boundary", "finite"),
+        default=PursuitSetup.gradient,
+        help="area gradient in non-convex domains (default boundary)",
+    )
     p.set_defaults(run=run_pursuit)
 
 
@@ -64,8 +88,14 @@ def run_pursuit(args) -> int:
     tasks = trial_tasks(args.domain, args.pursuers, args.trials, args.seed, setup)
     with tqdm(total=len(tasks), desc="trials", unit="trial", file=sys.stderr) as bar:
         try:
-            results = run_batch(tasks, run_trial, args.out / "trials.jsonl", workers=args.workers,
-                                scheduler=args.scheduler, on_result=lambda _: bar.update())  # fmt: skip
+            results = run_batch(
+                tasks,
+                run_trial,
+                args.out / "trials.jsonl",
+                workers=args.workers,
+                scheduler=args.scheduler,
+                on_result=lambda _: bar.update(),
+            )
         except BatchInterrupted as exc:
             raise arguments.UsageError(str(exc)) from None
     wanted = {t["key"] for t in tasks}
@@ -106,12 +136,17 @@ def table_markdown(table: dict, domains, counts) -> str:
         a, p = row["area_time_quartiles"], row["pure_time_quartiles"]
         return f"{_q(a)} / {_q(p)} ({row['area_uncaptured']}/{row['pure_uncaptured']})"
 
-    return "\n".join([
-        "% of trials where area pursuit captured sooner than pure pursuit: ours (thesis)", "",
-        *_grid(table, domains, counts, share), "",
-        "median capture time [quartiles], area / pure (uncaptured within the limit)", "",
-        *_grid(table, domains, counts, times),
-    ])  # fmt: skip
+    return "\n".join(
+        [
+            "% of trials where area pursuit captured sooner than pure pursuit: ours (thesis)",
+            "",
+            *_grid(table, domains, counts, share),
+            "",
+            "median capture time [quartiles], area / pure (uncaptured within the limit)",
+            "",
+            *_grid(table, domains, counts, times),
+        ]
+    )
 
 
 def _grid(table: dict, domains, counts, cell) -> list[str]:

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from bearcat.progress import solve_bars
-from scenarios.schema import load_scenario
+from bearcat.scenarios.schema import load_scenario
 
 
 def register(subparsers) -> None:
@@ -28,9 +28,15 @@ def register(subparsers) -> None:
         help="replay a run's Rerun recording",
         description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing).",
     )
-    view.add_argument("run_dir", metavar="RUN", type=Path, help="a run directory (bearcat run --out, bearcat simulate --out)")
-    view.add_argument("--screenshot", type=Path, metavar="PNG",
-                      help="render headless to this PNG instead of opening a window (needs a Vulkan driver such as mesa's)")
+    view.add_argument(
+        "run_dir", metavar="RUN", type=Path, help="a run directory (bearcat run --out, bearcat simulate --out)"
+    )
+    view.add_argument(
+        "--screenshot",
+        type=Path,
+        metavar="PNG",
+        help="render headless to this PNG instead of opening a window (needs a Vulkan driver such as mesa's)",
+    )
     view.set_defaults(run=run_view)
 
     peer = subparsers.add_parser(
@@ -40,33 +46,64 @@ def register(subparsers) -> None:
         "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
     )
     peer.add_argument("role", choices=("ground-station", "walker", "uav"))
-    peer.add_argument("--scenario", required=True, metavar="SCENARIO",
-                      help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station")
-    peer.add_argument("--id", default="gs", metavar="ID", help="the walker's or UAV's id (ignored for the ground station)")
-    peer.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
-                      help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)")
-    peer.add_argument("--listen", action="append", metavar="ENDPOINT",
-                      help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0; clients do not listen)")
-    peer.add_argument("--mode", choices=("peer", "client"), default="peer",
-                      help="Zenoh mode: peer (default) or client of the router it connects to (what bearcat run uses)")
-    peer.add_argument("--judge", choices=("truth", "fixes"), default="truth",
-                      help="what the referee judges on: the simulation's truth (default), or the fixes, for real players")
+    peer.add_argument(
+        "--scenario",
+        required=True,
+        metavar="SCENARIO",
+        help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station",
+    )
+    peer.add_argument(
+        "--id", default="gs", metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
+    )
+    peer.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    peer.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0; clients do not listen)",
+    )
+    peer.add_argument(
+        "--mode",
+        choices=("peer", "client"),
+        default="peer",
+        help="Zenoh mode: peer (default) or client of the router it connects to (what bearcat run uses)",
+    )
+    peer.add_argument(
+        "--judge",
+        choices=("truth", "fixes"),
+        default="truth",
+        help="what the referee judges on: the simulation's truth (default), or the fixes, for real players",
+    )
     peer.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
-    peer.add_argument("--vehicle", metavar="URL",
-                      help="uav: MAVSDK URL of the vehicle, e.g. udpin://0.0.0.0:14540 (PX4 SITL, bearcat vehicle) "
-                      "or serial:///dev/ttyACM0:57600 (a real PX4)")
-    peer.add_argument("--sysid", type=int, metavar="N", help="uav: the vehicle's MAVLink system id (default: the first autopilot)")
-    peer.add_argument("--emulated", action="store_true",
-                      help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see")
+    peer.add_argument(
+        "--vehicle",
+        metavar="URL",
+        help="uav: MAVSDK URL of the vehicle, e.g. udpin://0.0.0.0:14540 (PX4 SITL, bearcat vehicle) "
+        "or serial:///dev/ttyACM0:57600 (a real PX4)",
+    )
+    peer.add_argument(
+        "--sysid", type=int, metavar="N", help="uav: the vehicle's MAVLink system id (default: the first autopilot)"
+    )
+    peer.add_argument(
+        "--emulated",
+        action="store_true",
+        help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see",
+    )
     peer.set_defaults(run=run_peer)
 
 
 def run_live(args) -> int:
-    from scenarios.cast import cast
-    from scenarios.launch import launch
-    from netem.profiles import load_profile
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import cast
+    from bearcat.scenarios.launch import launch
 
     scenario = load_scenario(args.scenario)
     seed = scenario.seed if args.seed is None else args.seed
@@ -77,8 +114,9 @@ def run_live(args) -> int:
     progress = solve_bars()
     cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=progress)
     progress.close()
-    outcome = launch(scenario, _reference(args.scenario), out, seed=seed, netem=netem,
-                     say=lambda text: print(text, flush=True))  # fmt: skip
+    outcome = launch(
+        scenario, _reference(args.scenario), out, seed=seed, netem=netem, say=lambda text: print(text, flush=True)
+    )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
     print(f"run directory: {out} (events.jsonl, outcome.json, recording.rrd, peers/); replay: bearcat view {out}")
@@ -88,14 +126,16 @@ def run_live(args) -> int:
 
 
 def run_view(args) -> int:
-    from agents.ground_station.recording import write_recording
-    from maps import read_geojson
+    from bearcat.agents.ground_station.recording import write_recording
+    from bearcat.maps import read_geojson
 
     rrd = args.run_dir / "recording.rrd"
     if not rrd.exists():
         events, map_file = args.run_dir / "events.jsonl", args.run_dir / "map.geojson"
         if not (events.exists() and map_file.exists()):
-            raise FileNotFoundError(f"{args.run_dir} is not a run directory: it has no recording.rrd nor events.jsonl and map.geojson")
+            raise FileNotFoundError(
+                f"{args.run_dir} is not a run directory: it has no recording.rrd nor events.jsonl and map.geojson"
+            )
         write_recording(events, read_geojson(map_file), rrd, name=args.run_dir.name)
     if args.screenshot is not None:
         return _open_viewer(rrd, "--headless", "--screenshot-to", str(args.screenshot), "--window-size", "1280x720")
@@ -113,17 +153,27 @@ def _open_viewer(rrd: Path, *extra: str) -> int:
 
 
 def run_peer(args) -> int:
-    from scenarios.live import fetch_scenario, start_peer
+    from bearcat.scenarios.live import fetch_scenario, start_peer
 
     if args.scenario.startswith("zenoh:"):
-        scenario = fetch_scenario(args.scenario[len("zenoh:"):], args.connect)
+        scenario = fetch_scenario(args.scenario[len("zenoh:") :], args.connect)
     else:
         scenario = load_scenario(args.scenario)
     reason = start_peer(
-        args.role, scenario, args.id, connect=args.connect, listen=args.listen, mode=args.mode, judge=args.judge,
-        seed=scenario.seed if args.seed is None else args.seed, netem=args.netem or scenario.netem, out=args.out,
-        vehicle=args.vehicle, sysid=args.sysid, emulated=args.emulated,
-    )  # fmt: skip
+        args.role,
+        scenario,
+        args.id,
+        connect=args.connect,
+        listen=args.listen,
+        mode=args.mode,
+        judge=args.judge,
+        seed=scenario.seed if args.seed is None else args.seed,
+        netem=args.netem or scenario.netem,
+        out=args.out,
+        vehicle=args.vehicle,
+        sysid=args.sysid,
+        emulated=args.emulated,
+    )
     print(f"peer {args.id if args.role != 'ground-station' else 'gs'}: {reason}", flush=True)
     return 0
 

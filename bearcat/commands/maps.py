@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 
-from maps import Map, list_maps, load_map
+from bearcat.maps import Map, list_maps, load_map
 
 
 def register(subparsers) -> None:
@@ -90,7 +90,7 @@ def _draw(m: Map, output: str) -> None:
     # A bare Figure renders headless without touching pyplot's global backend.
     from matplotlib.figure import Figure
 
-    from maps.plot import draw_map
+    from bearcat.maps.plot import draw_map
 
     xmin, ymin, xmax, ymax = m.bounds
     height = min(8.0, max(3.5, 7.0 * (ymax - ymin) / (xmax - xmin) + 1.2))

@@ -16,10 +16,10 @@ from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
 
-from agents.ground_station.recording import finish_run
+from bearcat.agents.ground_station.recording import finish_run
 from bearcat.progress import solve_bars
-from scenarios.schema import list_scenarios, load_scenario
-from scenarios.simulate import simulate
+from bearcat.scenarios.schema import list_scenarios, load_scenario
+from bearcat.scenarios.simulate import simulate
 
 
 def register(subparsers) -> None:
@@ -61,8 +61,12 @@ def run(args) -> int:
         else:
             who = f"{outcome.winner} wins" if outcome.winner else "no winner"
             print(f"seed {seed}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}", flush=True)
-    summary = {"scenario": scenario.name, "netem": args.netem or scenario.netem, "trials": args.trials,
-               "wins": dict(sorted(tally.items()))}  # fmt: skip
+    summary = {
+        "scenario": scenario.name,
+        "netem": args.netem or scenario.netem,
+        "trials": args.trials,
+        "wins": dict(sorted(tally.items())),
+    }
     if args.json:
         print(json.dumps(summary))
     else:

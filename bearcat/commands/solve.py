@@ -17,8 +17,8 @@ import numpy as np
 
 from bearcat import arguments
 from bearcat.commands import ctf as ctf_command
-from maps import Map, MapError, Raster, load_map, rasterize
-from solvers.openloop import Defender, OpenLoopSolution, solve_openloop
+from bearcat.maps import Map, MapError, Raster, load_map, rasterize
+from bearcat.solvers.openloop import Defender, OpenLoopSolution, solve_openloop
 
 #: Default grid: this many cells along the longer side of the map, so a
 #: 10 m maze and a 400 m campus both get a useful resolution.
@@ -83,23 +83,42 @@ def register(subparsers) -> None:
     openloop.add_argument("--map", required=True, help="built-in map name or path to a GeoJSON map")
     openloop.add_argument("--attacker", required=True, type=arguments.point, metavar="X,Y")
     openloop.add_argument(
-        "--defender", action="extend", nargs="+", type=defender_spec, default=[],
-        metavar="X,Y[,SPEED]", help="a defender (repeatable); SPEED in m/s on full-speed terrain, default 1",
+        "--defender",
+        action="extend",
+        nargs="+",
+        type=defender_spec,
+        default=[],
+        metavar="X,Y[,SPEED]",
+        help="a defender (repeatable); SPEED in m/s on full-speed terrain, default 1",
     )
     openloop.add_argument(
-        "--target", action="extend", nargs="+", type=target_spec, required=True,
-        metavar="REGION|X,Y,R", help="the target of each stage, in order",
+        "--target",
+        action="extend",
+        nargs="+",
+        type=target_spec,
+        required=True,
+        metavar="REGION|X,Y,R",
+        help="the target of each stage, in order",
     )
     openloop.add_argument(
-        "--stage-speed", action="extend", nargs="+", type=arguments.positive, metavar="F",
+        "--stage-speed",
+        action="extend",
+        nargs="+",
+        type=arguments.positive,
+        metavar="F",
         help="attacker speed in m/s on full-speed terrain, one per stage or one for all (default 1)",
     )
     openloop.add_argument(
-        "--capture-radius", type=arguments.non_negative, default=0.0, metavar="R",
+        "--capture-radius",
+        type=arguments.non_negative,
+        default=0.0,
+        metavar="R",
         help="capture radius in metres (default 0)",
     )
     openloop.add_argument(
-        "--spacing", type=arguments.positive, metavar="M",
+        "--spacing",
+        type=arguments.positive,
+        metavar="M",
         help=f"grid spacing in metres (default: the longer side of the map / {DEFAULT_CELLS})",
     )
     openloop.add_argument("--order", type=int, choices=(1, 2), default=1, help="fast-marching order")
@@ -114,7 +133,9 @@ def stage_speeds(args, stages: int) -> list[float]:
     if len(speeds) == 1:
         return speeds * stages
     if len(speeds) != stages:
-        raise arguments.UsageError(f"--stage-speed gives {len(speeds)} speeds for {stages} targets; give one or one per target")
+        raise arguments.UsageError(
+            f"--stage-speed gives {len(speeds)} speeds for {stages} targets; give one or one per target"
+        )
     return speeds
 
 

@@ -8,7 +8,7 @@ import json
 import sys
 from pathlib import Path
 
-from scenarios.studies import STUDIES
+from bearcat.scenarios.studies import STUDIES
 
 
 def register(subparsers) -> None:
@@ -32,11 +32,11 @@ def register(subparsers) -> None:
 def run(args) -> int:
     from tqdm import tqdm
 
-    from netem.profiles import load_profile
-    from scenarios.batch import run_batch
-    from scenarios.cast import cast
-    from scenarios.schema import load_scenario
-    from scenarios.studies import play_task, study_tasks, summarise, summarise_search
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.batch import run_batch
+    from bearcat.scenarios.cast import cast
+    from bearcat.scenarios.schema import load_scenario
+    from bearcat.scenarios.studies import play_task, study_tasks, summarise, summarise_search
 
     for profile in args.netem or ():
         load_profile(profile)
@@ -51,8 +51,9 @@ def run(args) -> int:
         cast(scenario, load_profile(scenario.netem), 0, people=[], ground=True)
     tasks = study_tasks(args.study, args.trials, args.seed, args.netem)
     with tqdm(total=len(tasks), desc=args.study, unit="game", file=sys.stderr) as bar:
-        results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers,
-                            on_result=lambda r: bar.update(1))  # fmt: skip
+        results = run_batch(
+            tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=lambda r: bar.update(1)
+        )
     if args.study == "search":
         rows = summarise_search(results.values())
         (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
@@ -66,20 +67,28 @@ def run(args) -> int:
 
 
 def _print_search(rows) -> None:
-    print(f"{'search':<14}{'games':>6}{'found':>7}{'median s':>10}{'mean s':>8}{'attacker wins':>15}{'95% interval':>15}")
+    print(
+        f"{'search':<14}{'games':>6}{'found':>7}{'median s':>10}{'mean s':>8}{'attacker wins':>15}{'95% interval':>15}"
+    )
     for r in rows:
         median = "-" if r["median_time_to_find"] is None else f"{r['median_time_to_find']:.1f}"
         mean = "-" if r["mean_time_to_find"] is None else f"{r['mean_time_to_find']:.1f}"
         low, high = r["win_rate_95"]
-        print(f"{r['search']:<14}{r['games']:>6}{r['found']:>7}{median:>10}{mean:>8}"
-              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){f'{100 * low:.0f}-{100 * high:.0f}%':>13}")  # fmt: skip
+        print(
+            f"{r['search']:<14}{r['games']:>6}{r['found']:>7}{median:>10}{mean:>8}"
+            f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){f'{100 * low:.0f}-{100 * high:.0f}%':>13}"
+        )
 
 
 def _print_goes(rows) -> None:
-    print(f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}"
-          f"{'really open':>13}{'of them won':>13}")  # fmt: skip
+    print(
+        f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}"
+        f"{'really open':>13}{'of them won':>13}"
+    )
     for r in rows:
         rate = "" if r["false_go_rate"] is None else f" ({100 * r['false_go_rate']:.0f}%)"
-        print(f"{r['scenario']:<26}{r['netem'] or 'its own':<13}{r['games']:>6}"
-              f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate:<6}"
-              f"{r['goes_really_open']:>13}{r['really_open_won']:>13}")  # fmt: skip
+        print(
+            f"{r['scenario']:<26}{r['netem'] or 'its own':<13}{r['games']:>6}"
+            f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate:<6}"
+            f"{r['goes_really_open']:>13}{r['really_open_won']:>13}"
+        )
