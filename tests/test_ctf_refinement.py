@@ -4,6 +4,7 @@ A scheme whose set still drifts with the grid at this resolution would make
 every slice the phones show depend on the grid rather than the game."""
 
 import numpy as np
+import pytest
 from scipy import ndimage
 from scipy.interpolate import RegularGridInterpolator
 
@@ -20,6 +21,7 @@ def flag_return(n):
     return arena, solution.sets["return"].value
 
 
+@pytest.mark.slow
 def test_the_flag_return_boundary_moves_less_than_a_cell_from_35_to_45_points():
     coarse_arena, coarse = flag_return(35)
     fine_arena, fine = flag_return(45)

@@ -15,11 +15,11 @@ import time
 from pathlib import Path
 
 import pytest
-from field import write_scenario
 
 from bearcat.agents.ground_station.recorder import read_events
 from bearcat.bus import keys
 from bearcat.bus.zenoh_session import ZenohSession, config
+from tests.support.scenario_files import write_scenario
 
 
 @pytest.fixture

@@ -2,9 +2,9 @@
 naming the file and the key."""
 
 import pytest
-from field import scenario_text
 
 from bearcat.scenarios.schema import ScenarioError, list_scenarios, load_scenario, parse_scenario
+from tests.support.scenario_files import scenario_text
 
 
 @pytest.mark.parametrize("name", list_scenarios())

@@ -9,7 +9,6 @@ import json
 import numpy as np
 import pytest
 import shapely
-from field import write_scenario
 
 from bearcat.agents.ground_station.recorder import read_events
 from bearcat.agents.ground_station.referee import Contest, Referee
@@ -18,6 +17,7 @@ from bearcat.bus.messages import Control, Truth
 from bearcat.maps import load_map
 from bearcat.scenarios.schema import load_scenario
 from bearcat.scenarios.simulate import simulate
+from tests.support.scenario_files import write_scenario
 
 
 @pytest.fixture(autouse=True)
