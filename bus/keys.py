@@ -27,7 +27,9 @@ from bearcat.bus.errors import BusError
 ROOT = "bearcat"
 ROLES = ("walker", "phone", "ground-station", "uav", "referee", "recorder", "launcher")
 
-_NAME = re.compile(r"^[A-Za-z0-9_-]{1,64}$")
+NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
+"""Every game, agent and peer name: one key chunk, safe in a file name, 64 characters at most."""
+_NAME = re.compile(NAME_PATTERN)
 
 # Kinds of key, with the chunk pattern after "bearcat/{game}/"; "{}" is a name.
 _KINDS = {

@@ -14,9 +14,11 @@ from typing import Annotated, Literal
 
 import msgspec
 
+from bearcat.bus.keys import NAME_PATTERN
+
 SCHEMA_VERSION = 1
 
-Name = Annotated[str, msgspec.Meta(pattern=r"^[A-Za-z0-9_-]{1,64}$")]
+Name = Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)]
 Latitude = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
 Longitude = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
 Heading = Annotated[float, msgspec.Meta(ge=0.0, lt=360.0)]

@@ -11,6 +11,7 @@ guidance polygon crosses it.
 
 from __future__ import annotations
 
+import math
 from functools import lru_cache
 
 import numpy as np
@@ -45,3 +46,19 @@ def to_geodetic(x, y, origin: tuple[float, float]):
     x, y = np.broadcast_arrays(np.asarray(x, dtype=float), np.asarray(y, dtype=float))
     lon, lat = inverse.transform(x, y)
     return _output(lat), _output(lon)
+
+
+def bearing(east: float, north: float) -> float:
+    """Degrees clockwise from north of an (east, north) direction, in [0, 360).
+
+    Headings cross the wire in this form. A float remainder such as
+    ``-1e-17 % 360.0`` rounds up to 360.0, which the wire's range refuses,
+    so that case folds to 0 here, once for every caller.
+    """
+    return compass_degrees(math.atan2(east, north))
+
+
+def compass_degrees(radians: float) -> float:
+    """A heading in radians clockwise from north as degrees in [0, 360)."""
+    degrees = math.degrees(radians) % 360.0
+    return 0.0 if degrees >= 360.0 else degrees

@@ -22,8 +22,6 @@ solver is asked, as a person's phone would still show them somewhere.
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import shapely
 import shapely.ops
@@ -32,6 +30,7 @@ from bearcat.agents.protocol import Send
 from bearcat.bus import keys
 from bearcat.bus.messages import Detection, Fix, GameState, Guidance, Message, Report
 from bearcat.maps import Map
+from bearcat.maps.geodesy import bearing
 from bearcat.solvers.ctf_guidance import Guidance as CtfGuidance
 from bearcat.solvers.errors import InputError
 
@@ -226,7 +225,7 @@ class CtfAdvisor:
             )
         return {
             "game": "ctf",
-            "heading": None if heading is None else _bearing(heading),
+            "heading": None if heading is None else bearing(*heading),
             "region": self._rings(self.solved.polygons(values, side)),
             "region_of": region_of,
             "go": report.winner == "attacker" if agent == self.attacker else None,
@@ -295,7 +294,7 @@ class PursuitAdvisor:
         ]
         fields = {"game": "pursuit", "region_of": self.evader, "value": float(_shoelace(cell)) if len(cell) else 0.0}
         if np.any(heading):
-            fields["heading"] = _bearing(heading)
+            fields["heading"] = bearing(*heading)
         if len(cell) >= 3:
             fields["region"] = [self._geodetic(np.vstack([cell, cell[:1]]))]
         if len(on_line) >= 2:
@@ -369,7 +368,7 @@ class ReachAvoidAdvisor:
             along = np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])
             aim = path[min(int(np.searchsorted(along, 3.0 * max(self.grid.spacing))), len(path) - 1)]
             if np.hypot(*(aim - a)) > 1e-9:
-                fields["heading"] = _bearing(aim - a)
+                fields["heading"] = bearing(*(aim - a))
             fields["boundary"] = _geodetic_rings(self.map, [path[:: max(1, len(path) // 2000)]])
             fields["value"] = float(solution.value)
         return fields
@@ -454,9 +453,3 @@ def _mask_rings(grid, mask: np.ndarray) -> list[np.ndarray]:
 def _shoelace(ring: np.ndarray) -> float:
     x, y = ring[:, 0], ring[:, 1]
     return 0.5 * abs(float(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1))))
-
-
-def _bearing(vector) -> float:
-    """Degrees clockwise from north of an (east, north) vector, in [0, 360)."""
-    b = math.degrees(math.atan2(vector[0], vector[1])) % 360.0
-    return 0.0 if b >= 360.0 else b

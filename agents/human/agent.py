@@ -10,7 +10,6 @@ the flag) and when the game is over.
 
 from __future__ import annotations
 
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -21,6 +20,7 @@ from bearcat.agents.human.walker import Walker
 from bearcat.agents.protocol import Send
 from bearcat.bus import keys
 from bearcat.bus.messages import Control, GameState, Guidance, Message, Truth
+from bearcat.maps.geodesy import compass_degrees
 
 TICK = 0.1  # s: the body's integration step and decision rate
 
@@ -90,8 +90,8 @@ class HumanAgent:
     def _report(self, now: float) -> list[Send]:
         position, heading = self.walker.position, self.walker.heading
         lat, lon = self.walker.map.to_geodetic(position[0], position[1])
-        bearing = None if heading is None else math.degrees(heading) % 360.0
-        truth = Truth(agent=self.name, t=now, lat=lat, lon=lon, heading=bearing if bearing != 360.0 else 0.0)
+        bearing = None if heading is None else compass_degrees(heading)
+        truth = Truth(agent=self.name, t=now, lat=lat, lon=lon, heading=bearing)
         out = [Send(keys.truth(self.game, self.name), truth)]
         fix = self.phone.fix(now, np.array(position), heading)
         if fix is not None:

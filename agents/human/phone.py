@@ -19,6 +19,7 @@ import shapely
 
 from bearcat.bus.messages import Fix, Guidance
 from bearcat.maps import Map
+from bearcat.maps.geodesy import compass_degrees
 from bearcat.netem.models import CompassError, CompassTrack, GpsError, GpsTrack
 
 
@@ -100,7 +101,7 @@ class Phone:
             self._heading = heading
         x, y = np.asarray(position, float) + error
         lat, lon = self.map.to_geodetic(x, y)
-        reading = math.degrees(self.compass.reading(self._heading)) % 360.0
+        reading = compass_degrees(self.compass.reading(self._heading))
         self.seq += 1
         return Fix(
             agent=self.agent,
@@ -108,7 +109,7 @@ class Phone:
             t=now,
             lat=lat,
             lon=lon,
-            heading=reading if reading < 360.0 else 0.0,
+            heading=reading,
             accuracy=self.gps.model.horizontal_sigma(near <= self.gps.model.urban_distance),
         )
 

@@ -23,7 +23,7 @@ import numpy as np
 
 from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.flight import Flight, Main, Sub
-from bearcat.maps.geodesy import to_geodetic, to_local
+from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 log = logging.getLogger("bearcat.uav")
 
@@ -90,7 +90,7 @@ class SimulatedAutopilot:
         b = f.body
         lat, lon = to_geodetic(b.position[0], b.position[1], self.home)
         speed = float(np.hypot(*b.velocity[:2]))
-        heading = _bearing(b.velocity[0], b.velocity[1]) if speed > 0.2 else None
+        heading = bearing(b.velocity[0], b.velocity[1]) if speed > 0.2 else None
         mode = "offboard" if f.main == Main.OFFBOARD else MODE_NAMES.get((f.main, f.sub), "other")
         return VehicleState(lat, lon, float(b.position[2]), speed, heading, f.armed, f.in_air, mode, b.battery)
 
@@ -187,7 +187,7 @@ class MavsdkAutopilot:
             return None
         p, v = s["position"], s.get("velocity_ned")
         speed = 0.0 if v is None else math.hypot(v.north_m_s, v.east_m_s)
-        heading = None if v is None or speed <= 0.2 else _bearing(v.east_m_s, v.north_m_s)
+        heading = None if v is None or speed <= 0.2 else bearing(v.east_m_s, v.north_m_s)
         battery = s.get("battery")
         mode = s.get("flight_mode")
         return VehicleState(
@@ -259,12 +259,6 @@ class MavsdkAutopilot:
     async def _follow(self, name: str) -> None:
         async for value in getattr(self.telemetry, "subscribe_" + name)():
             self._state[name] = value
-
-
-def _bearing(east: float, north: float) -> float:
-    """Degrees clockwise from north in [0, 360) (a remainder can round up to 360)."""
-    degrees = math.degrees(math.atan2(east, north)) % 360.0
-    return 0.0 if degrees >= 360.0 else degrees
 
 
 _routed = False

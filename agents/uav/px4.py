@@ -23,7 +23,7 @@ import math
 from pymavlink.dialects.v20 import common as mav
 
 from bearcat.agents.uav.flight import Flight, Main, Result
-from bearcat.maps.geodesy import to_geodetic, to_local
+from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 # Telemetry streams and their periods (s), PX4's defaults on a telemetry link.
 STREAMS = {
@@ -154,7 +154,7 @@ class Px4Face:
         b = self.flight.body
         lat, lon = self._geodetic(b.position[0], b.position[1])
         ve, vn, vu = b.velocity
-        heading = math.degrees(math.atan2(ve, vn)) % 360.0 if math.hypot(ve, vn) > 0.2 else 0.0
+        heading = bearing(ve, vn) if math.hypot(ve, vn) > 0.2 else 0.0
         return mav.MAVLink_global_position_int_message(
             self._ms(now),
             round(lat * 1e7),

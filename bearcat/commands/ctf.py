@@ -9,7 +9,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import sys
 import time
 from dataclasses import asdict
@@ -25,6 +24,7 @@ from bearcat.agents.ground_station.ctf_cache import (
     unresolved_capture,
 )
 from bearcat.maps import load_map
+from bearcat.maps.geodesy import bearing
 from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
 from bearcat.solvers.ctf_guidance import Guidance
 from bearcat.solvers.ctf_playout import play
@@ -288,7 +288,7 @@ def bearing_deg(heading) -> float | None:
     """Degrees clockwise from north, as the phones show a heading."""
     if heading is None:
         return None
-    return round(math.degrees(math.atan2(heading[0], heading[1])) % 360.0, 2)
+    return round(bearing(heading[0], heading[1]), 2)
 
 
 def run_query(args) -> int:
