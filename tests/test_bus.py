@@ -255,6 +255,10 @@ def test_zenoh_delivers_fixes_and_state_with_the_sender_and_drops_garbage(zenoh_
 
 
 def test_zenoh_liveliness_vanishes_within_two_seconds_of_a_close(zenoh_pair):
+    """A requirement: the launcher and the referee must learn of a peer's exit
+    within two seconds to end the game on time. A clean close is seen in
+    milliseconds on loopback; two seconds is the link lease (1 s) with a full
+    second of margin for a loaded 2-core machine."""
     hub, leaf = zenoh_pair
     events = []
     hub.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, alive: events.append((time.monotonic(), alive)))

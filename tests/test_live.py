@@ -74,6 +74,10 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path, env):
 
 
 def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path, env):
+    """A requirement: a SIGKILLed player must end the game within two seconds,
+    or the referee keeps judging a game with a player who is not there. The
+    socket closes with the process, so Zenoh reports the token gone in
+    milliseconds; the margin covers a loaded 2-core machine."""
     launcher, out, path = start_run(
         tmp_path,
         env,

@@ -347,6 +347,10 @@ def test_two_uavs_fly_at_once():
 
 
 def test_emulator_refuses_unknown_commands_at_once_and_survives_garbage(vehicle):
+    """The 0.5 s is a requirement: MAVSDK resends a command it has no
+    COMMAND_ACK for after about 0.5 s, so a slower answer would make the
+    client see a timeout instead of UNSUPPORTED. The emulator answers in a
+    millisecond or two; the rest is margin for a loaded machine."""
     client = mavutil.mavlink_connection(f"udpin:127.0.0.1:{vehicle.port}", source_system=245, source_component=190)
     try:
         assert client.wait_heartbeat(timeout=5) is not None
