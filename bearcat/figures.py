@@ -76,7 +76,7 @@ def openloop_figure(
 def _region(ax, guidance, values: np.ndarray, side: str, colour: str, label: str) -> None:
     """Fill a slice's region (``values <= 0`` for the attacker's, ``> 0``
     for the defender's) with its zero level as the edge."""
-    x, y = guidance.arena.grid.axes()
+    x, y = guidance.geometry.grid.axes()
     finite = float(np.max(np.abs(values))) + 1.0
     levels = [-finite, 0.0] if side == "attacker" else [0.0, finite]
     ax.contourf(x, y, values.T, levels=levels, colors=[colour], alpha=0.35)

@@ -137,30 +137,30 @@ GAME_MAP, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON = "field-50", 3.0, 2.5, 
 def run_game(n: int) -> dict:
     """The two-stage game (R_A, then W_A) on field-50 to convergence, then
     the guidance queries of one ground-station tick on it."""
-    from bearcat.agents.ground_station.ctf_arena import ctf_arena
     from bearcat.maps import load_map
+    from bearcat.maps.ctf import ctf_geometry
     from bearcat.solvers.ctf import Rules, solve_ctf
-    from bearcat.solvers.ctf_guidance import Guidance
+    from bearcat.solvers.ctf_queries import CtfQueries
 
     rules = Rules(GAME_SPEED, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON, GAME_HORIZON)
     game_map = load_map(GAME_MAP)
-    solve_ctf(ctf_arena(game_map, 9), rules, "both")  # load the compiled kernels
-    arena = ctf_arena(game_map, n)
+    solve_ctf(ctf_geometry(game_map, 9), rules, "both")  # load the compiled kernels
+    geometry = ctf_geometry(game_map, n)
     start = time.perf_counter()
-    solution = solve_ctf(arena, rules, "both")
+    solution = solve_ctf(geometry, rules, "both")
     seconds = time.perf_counter() - start
-    guidance = Guidance(solution)
+    queries = CtfQueries(solution)
     rng = np.random.default_rng(0)
     states = rng.uniform(0.0, 50.0, size=(200, 4))
     timings = {"evaluate": [], "slices": [], "polygons": []}
     for k, state in enumerate(states):
         a, d = state[:2], state[2:]
         t0 = time.perf_counter()
-        guidance.evaluate(a, d)
+        queries.evaluate(a, d)
         t1 = time.perf_counter()
-        rd, ra = guidance.defender_region_values(a), guidance.attacker_region_values(d)
+        rd, ra = queries.defender_region_values(a), queries.attacker_region_values(d)
         t2 = time.perf_counter()
-        guidance.polygons(rd, "defender"), guidance.polygons(ra, "attacker")
+        queries.polygons(rd, "defender"), queries.polygons(ra, "attacker")
         t3 = time.perf_counter()
         if k >= 10:  # the first calls load compiled code
             for key, dt in zip(timings, (t1 - t0, t2 - t1, t3 - t2)):

@@ -27,7 +27,8 @@ Metres = Annotated[float, msgspec.Meta(ge=0.0, le=1e7)]
 Altitude = Annotated[float, msgspec.Meta(ge=-1e4, le=1e5)]
 Speed = Annotated[float, msgspec.Meta(ge=0.0, le=1e3)]
 Sequence = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
-Point = tuple[Latitude, Longitude]
+# GeoJSON's order, as the maps use: longitude first.
+Point = tuple[Longitude, Latitude]
 # A closed ring or an open line of up to 4096 points; up to 64 of them.
 Line = Annotated[list[Point], msgspec.Meta(max_length=4096)]
 Lines = Annotated[list[Line], msgspec.Meta(max_length=64)]
@@ -94,7 +95,11 @@ class Guidance(Message, tag="guidance"):
     ``possible`` where an unseen opponent may be (P_D of thesis 6.2), and
     ``worst_case`` whether ``value``, ``heading`` and ``go`` hold against
     every one of those places; ``seen_by`` the opponents' UAVs that have
-    just seen this agent."""
+    just seen this agent.
+
+    Every point of ``region``, ``boundary`` and ``possible`` is a WGS84
+    ``[lon, lat]`` pair, GeoJSON's order (RFC 7946), as in the maps: a ring
+    or line reads as a GeoJSON ``LinearRing`` or ``LineString``."""
 
     agent: Name
     seq: Sequence

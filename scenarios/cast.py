@@ -35,7 +35,7 @@ from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.autopilot import SimulatedAutopilot
 from bearcat.netem.profiles import Profile
 from bearcat.scenarios.schema import Scenario, ScenarioError
-from bearcat.solvers.ctf_guidance import Guidance as CtfGuidance
+from bearcat.solvers.ctf_queries import CtfQueries
 
 STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
 
@@ -167,11 +167,11 @@ class _CtfGame:
             game_map, teams, line_of_sight=r["visibility"] == "line-of-sight", uavs=[u.id for u in scenario.uavs]
         )
 
-    def solved(self, progress=None) -> CtfGuidance:
+    def solved(self, progress=None) -> CtfQueries:
         if self._solved is None:
             s = self.scenario
             found = load_or_solve(CtfGame(s.map, s.rules["grid"], self.rules), s.rules["stages"], progress=progress)
-            self._solved = CtfGuidance(found.solution)
+            self._solved = CtfQueries(found.solution)
         return self._solved
 
     def referee(self, on_truth: bool = True) -> Referee:

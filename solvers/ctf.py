@@ -13,7 +13,7 @@ entering a blocked place. In the sets of 3.3.1:
     W_A = RA_Tc(({x_a in F} n R_A) u G_D, C_J)
 
 and the defender's sets are the complements. Every set is the sub-zero set
-of a function built from signed distances of the 2-D geometry (``Arena``),
+of a function built from signed distances of the 2-D geometry (``CtfGeometry``),
 combined with ``min`` (union) and ``max`` (intersection); ``W_A`` takes the
 value of ``R_A`` itself as the level set of the second stage's target.
 
@@ -25,7 +25,7 @@ is "blocked", and a node exactly on an obstacle's edge is free, as in the
 map model (free space is closed).
 
 This module is pure numerics: arrays in, a ``CtfSolution`` out. Turning a
-map into an ``Arena`` and caching solutions on disk live at the edges.
+map into a ``CtfGeometry`` and caching solutions on disk live at the edges.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Player, SimpleMotion
 from bearcat.solvers.hji import PaddedField, ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
 
-__all__ = ["STAGES", "Arena", "CtfSolution", "Rules", "SetSolution", "required_game_bytes", "solve_ctf"]
+__all__ = ["STAGES", "CtfGeometry", "CtfSolution", "Rules", "SetSolution", "required_game_bytes", "solve_ctf"]
 
 STAGES = {
     "return": ("return",),  # R_A only: the flag-return game of the field trials (3.5)
@@ -64,7 +64,7 @@ EDGE_SLACK = 1e-3
 
 
 @dataclass(frozen=True, eq=False)
-class Arena:
+class CtfGeometry:
     """The game's 2-D geometry on the grid both players' positions live on.
 
     ``blocked``, ``flag`` and ``home`` are signed distances in metres
@@ -160,13 +160,13 @@ class CtfSolution:
     """The solved sets of one game, keyed ``"return"`` (R_A), ``"capture"``
     (F_A) and ``"win"`` (W_A), whichever were asked for."""
 
-    arena: Arena
+    geometry: CtfGeometry
     rules: Rules
     sets: dict[str, SetSolution] = field(default_factory=dict)
 
     @property
     def grid(self) -> Grid:
-        return self.arena.joint_grid()
+        return self.geometry.joint_grid()
 
     def first_stage(self) -> SetSolution:
         """The set that decides the game from its start: W_A if solved, else
@@ -181,11 +181,11 @@ ProgressCallback = Callable[[str, float, float, float], None]
 """``progress(set_name, t, horizon, change)`` after every convergence check."""
 
 
-def required_game_bytes(arena: Arena, stages: str = "both", *, scheme: str = "weno5", dtype=np.float32) -> int:
+def required_game_bytes(geometry: CtfGeometry, stages: str = "both", *, scheme: str = "weno5", dtype=np.float32) -> int:
     """Peak bytes of ``solve_ctf``: the solver's own arrays (with T*, and
     the target and avoid, built in place) plus the values and T* of the sets
     already solved."""
-    grid = arena.joint_grid()
+    grid = geometry.joint_grid()
     itemsize = np.dtype(dtype).itemsize
     kept = len(_stage_list(stages)) - 1
     solver = required_bytes(grid, scheme=scheme, dtype=dtype, record_tstar=True, record_gradient=False)
@@ -193,7 +193,7 @@ def required_game_bytes(arena: Arena, stages: str = "both", *, scheme: str = "we
 
 
 def solve_ctf(
-    arena: Arena,
+    geometry: CtfGeometry,
     rules: Rules,
     stages: str = "both",
     *,
@@ -211,9 +211,9 @@ def solve_ctf(
     ``CtfSolution.sets``."""
     names = _stage_list(stages)
     known = dict(known or {})
-    grid = arena.joint_grid()
+    grid = geometry.joint_grid()
     limit = available_bytes() if memory_limit is None else int(memory_limit)
-    need = required_game_bytes(arena, stages, scheme=scheme, dtype=dtype)
+    need = required_game_bytes(geometry, stages, scheme=scheme, dtype=dtype)
     if need > limit and not set(names) <= set(known):
         raise InputError(
             f"a {'x'.join(map(str, grid.shape))} game ({grid.size:,} joint states) needs about "
@@ -221,8 +221,8 @@ def solve_ctf(
             "use a coarser grid"
         )
     dtype = np.dtype(dtype)
-    game = _pursuit(arena, rules)
-    forfeit = _defender_forfeits(arena)
+    game = _pursuit(geometry, rules)
+    forfeit = _defender_forfeits(geometry)
     avoid = None  # built once, and only if a set is left to solve
     sets: dict[str, SetSolution] = {}
     for name in names:
@@ -230,9 +230,9 @@ def solve_ctf(
             sets[name] = known[name]
             continue
         if avoid is None:
-            avoid = _avoid(arena, rules, dtype)
+            avoid = _avoid(geometry, rules, dtype)
         horizon = rules.return_time if name == "return" else rules.capture_time
-        target = _target(name, arena, forfeit, sets, dtype)
+        target = _target(name, geometry, forfeit, sets, dtype)
         report = None if progress is None else (lambda t, change, n=name, h=horizon: progress(n, t, h, change))
         result = solve_reach_avoid(
             grid,
@@ -242,8 +242,8 @@ def solve_ctf(
             horizon=horizon,
             scheme=scheme,
             dtype=dtype,
-            tol=tol * min(arena.grid.spacing),
-            check_every=_check_window(arena, rules),
+            tol=tol * min(geometry.grid.spacing),
+            check_every=_check_window(geometry, rules),
             record_tstar=True,
             record_gradient=False,
             progress=report,
@@ -251,7 +251,7 @@ def solve_ctf(
         )
         del target
         sets[name] = SetSolution.from_result(name, result)
-    return CtfSolution(arena, rules, sets)
+    return CtfSolution(geometry, rules, sets)
 
 
 def _stage_list(stages: str) -> tuple[str, ...]:
@@ -261,15 +261,15 @@ def _stage_list(stages: str) -> tuple[str, ...]:
         raise InputError(f"stages must be one of {', '.join(STAGES)}, got {stages!r}") from None
 
 
-def _check_window(arena: Arena, rules: Rules) -> float:
+def _check_window(geometry: CtfGeometry, rules: Rules) -> float:
     """Seconds the faster player needs to cross two cells, the window of the
     convergence check: in cells and cell-crossing times the check means the
     same on a 10 m and a 400 m map."""
-    return 2.0 * max(arena.grid.spacing) / max(rules.attacker_speed, rules.defender_speed)
+    return 2.0 * max(geometry.grid.spacing) / max(rules.attacker_speed, rules.defender_speed)
 
 
-def _pursuit(arena: Arena, rules: Rules) -> SimpleMotion:
-    terrain = arena.terrain
+def _pursuit(geometry: CtfGeometry, rules: Rules) -> SimpleMotion:
+    terrain = geometry.terrain
     return SimpleMotion(
         (
             Player((0, 1), rules.attacker_speed * terrain, "control"),
@@ -278,8 +278,8 @@ def _pursuit(arena: Arena, rules: Rules) -> SimpleMotion:
     )
 
 
-def _shift(arena: Arena) -> float:
-    return EDGE_SLACK * min(arena.grid.spacing)
+def _shift(geometry: CtfGeometry) -> float:
+    return EDGE_SLACK * min(geometry.grid.spacing)
 
 
 def _attacker_part(a: np.ndarray, dtype) -> np.ndarray:
@@ -290,33 +290,33 @@ def _defender_part(b: np.ndarray, dtype) -> np.ndarray:
     return np.asarray(b, dtype)[None, None, :, :]
 
 
-def _avoid(arena: Arena, rules: Rules, dtype) -> PaddedField:
+def _avoid(geometry: CtfGeometry, rules: Rules, dtype) -> PaddedField:
     """``C_J = C u G_A``: captured, or the attacker blocked."""
-    avoid = PaddedField(arena.joint_grid(), dtype)
-    xs, ys = (np.asarray(v, dtype) for v in arena.grid.axes())
+    avoid = PaddedField(geometry.joint_grid(), dtype)
+    xs, ys = (np.asarray(v, dtype) for v in geometry.grid.axes())
     dx = xs[:, None, None, None] - xs[None, None, :, None]
     dy = ys[None, :, None, None] - ys[None, None, None, :]
     np.hypot(dx, dy, out=avoid.nodes)
     avoid.nodes -= dtype.type(rules.capture_radius)
-    np.minimum(avoid.nodes, _attacker_part(arena.blocked + _shift(arena), dtype), out=avoid.nodes)
+    np.minimum(avoid.nodes, _attacker_part(geometry.blocked + _shift(geometry), dtype), out=avoid.nodes)
     return avoid
 
 
-def _defender_forfeits(arena: Arena) -> np.ndarray:
+def _defender_forfeits(geometry: CtfGeometry) -> np.ndarray:
     """``G_D`` on the defender's plane: in F, in R or blocked."""
-    return np.minimum(np.minimum(arena.flag, arena.home), arena.blocked + _shift(arena))
+    return np.minimum(np.minimum(geometry.flag, geometry.home), geometry.blocked + _shift(geometry))
 
 
-def _target(name: str, arena: Arena, forfeit: np.ndarray, sets: dict[str, SetSolution], dtype) -> PaddedField:
+def _target(name: str, geometry: CtfGeometry, forfeit: np.ndarray, sets: dict[str, SetSolution], dtype) -> PaddedField:
     """The attacker's target of one set, ``G_x u G_D``."""
-    target = PaddedField(arena.joint_grid(), dtype)
+    target = PaddedField(geometry.joint_grid(), dtype)
     defender_forfeits = _defender_part(forfeit, dtype)
     if name == "return":
-        np.minimum(_attacker_part(arena.home, dtype), defender_forfeits, out=target.nodes)
+        np.minimum(_attacker_part(geometry.home, dtype), defender_forfeits, out=target.nodes)
     elif name == "capture":
-        np.minimum(_attacker_part(arena.flag, dtype), defender_forfeits, out=target.nodes)
+        np.minimum(_attacker_part(geometry.flag, dtype), defender_forfeits, out=target.nodes)
     else:
         # W_A: the flag reached inside R_A, i.e. max(l_F, J_RA); or a forfeit.
-        np.maximum(_attacker_part(arena.flag, dtype), sets["return"].value, out=target.nodes)
+        np.maximum(_attacker_part(geometry.flag, dtype), sets["return"].value, out=target.nodes)
         np.minimum(target.nodes, defender_forfeits, out=target.nodes)
     return target

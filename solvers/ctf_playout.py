@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bearcat.solvers.ctf_guidance import Guidance, StateReport, interpolate_2d
+from bearcat.solvers.ctf_queries import CtfQueries, StateReport, interpolate_2d
 from bearcat.solvers.errors import InputError
 
 __all__ = ["Playout", "play"]
@@ -46,7 +46,7 @@ class Playout:
 
 
 def play(
-    guidance: Guidance,
+    queries: CtfQueries,
     attacker,
     defender,
     *,
@@ -57,16 +57,16 @@ def play(
     """Play from ``(attacker, defender)`` until somebody wins. ``phase``
     defaults to ``"capture"`` if the solution has a first-stage set, else
     ``"return"``; a game solved for flag capture only ends at the flag."""
-    solution = guidance.solution
-    rules, arena = solution.rules, guidance.arena
+    solution = queries.solution
+    rules, geometry = solution.rules, queries.geometry
     sets = solution.sets
     two_stage = "return" in sets and ("win" in sets or "capture" in sets)
     if phase is None:
         phase = "capture" if ("win" in sets or "capture" in sets) else "return"
-    guidance.value_set(phase)  # refuses a phase the solution cannot guide
-    state = guidance.check_state(attacker, defender)
+    queries.value_set(phase)  # refuses a phase the solution cannot guide
+    state = queries.check_state(attacker, defender)
     xa, xd = state[:2].copy(), state[2:].copy()
-    grid = arena.grid
+    grid = geometry.grid
     lo, spacing = np.asarray(grid.lo), np.asarray(grid.spacing)
     dt = 0.25 * min(grid.spacing) / max(rules.attacker_speed, rules.defender_speed)
     limits = {"capture": rules.capture_time, "return": rules.return_time}
@@ -92,24 +92,24 @@ def play(
     while winner is None:
         if np.hypot(*(xa - xd)) <= rules.capture_radius:
             winner, reason = "defender", "captured"
-        elif inside(arena.flag, xd) or inside(arena.home, xd):
+        elif inside(geometry.flag, xd) or inside(geometry.home, xd):
             winner, reason = "attacker", "defender entered the flag or return region"
-        elif phase == "capture" and inside(arena.flag, xa):
+        elif phase == "capture" and inside(geometry.flag, xa):
             flag_time = t
             if not two_stage:
                 winner, reason = "attacker", "reached the flag"
             else:
                 phase, phase_start = "return", t
                 continue
-        elif phase == "return" and inside(arena.home, xa):
+        elif phase == "return" and inside(geometry.home, xa):
             winner, reason = "attacker", "returned the flag" if flag_time is not None else "reached the return region"
         elif t - phase_start >= limits[phase] - 1e-9:
             winner, reason = "defender", f"time up in the {phase} stage"
         if winner is not None:
             break
-        report = guidance.evaluate(xa, xd, phase)
+        report = queries.evaluate(xa, xd, phase)
         if phase == "capture" and report.value > 0 and "win" in sets and "capture" in sets:
-            grab = guidance.evaluate_set("capture", xa, xd)
+            grab = queries.evaluate_set("capture", xa, xd)
             if grab.value <= 0:
                 report = StateReport(report.value, grab.attacker_heading, report.defender_heading)
         moves = []
@@ -118,13 +118,13 @@ def play(
             ("defender", defender_policy, xd, rules.defender_speed),
         ):
             h = heading(policy, who, report)
-            factor = interpolate_2d(arena.terrain, lo, spacing, p)
+            factor = interpolate_2d(geometry.terrain, lo, spacing, p)
             moves.append(np.zeros(2) if h is None else speed * factor * dt * h)
         xa = np.clip(xa + moves[0], lo, grid.hi)
         xd = np.clip(xd + moves[1], lo, grid.hi)
-        if guidance.blocked_at(xa):
+        if queries.blocked_at(xa):
             winner, reason = "defender", "attacker ran into an obstacle"
-        elif guidance.blocked_at(xd):
+        elif queries.blocked_at(xd):
             winner, reason = "attacker", "defender ran into an obstacle"
         t += dt
         times.append(t)

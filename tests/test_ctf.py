@@ -14,12 +14,12 @@ import pytest
 import shapely
 from scipy import ndimage
 
-from bearcat.agents.ground_station.ctf_arena import ctf_arena
 from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve
 from bearcat.maps import MapError, load_map
+from bearcat.maps.ctf import ctf_geometry
 from bearcat.solvers.ctf import CtfSolution, Rules, required_game_bytes, solve_ctf
-from bearcat.solvers.ctf_guidance import Guidance, interpolate_2d
 from bearcat.solvers.ctf_playout import play
+from bearcat.solvers.ctf_queries import CtfQueries, interpolate_2d
 from bearcat.solvers.errors import InputError
 
 N = 21  # nodes per axis of the ctf-10 games: 0.5 m cells
@@ -28,7 +28,7 @@ RULES = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.8, captur
 # to a target the attacker can force its way to, and the return strip is
 # 1 m wide: no attacker state lies more than half a metre (one cell) deep,
 # except where the defender stands in the flag. Half a cell is as deep as
-# this arena allows "clearly inside W_A" to be; W_D reaches the capture
+# this geometry allows "clearly inside W_A" to be; W_D reaches the capture
 # radius, so one cell is clearly inside it.
 ATTACKER_DEPTH = 0.5  # cells
 DEFENDER_DEPTH = 1.0  # cells
@@ -42,29 +42,29 @@ def far_from_boundary(mask, cells):
     return np.where(mask, inside, outside) > cells
 
 
-def cell(arena):
-    return float(min(arena.grid.spacing))
+def cell(geometry):
+    return float(min(geometry.grid.spacing))
 
 
-def inside(arena, field, point):
+def inside(geometry, field, point):
     """``point`` lies in the region of the 2-D signed distance ``field``, as the referee sees it."""
-    g = arena.grid
+    g = geometry.grid
     return interpolate_2d(field, np.asarray(g.lo), np.asarray(g.spacing), np.asarray(point, float)) <= 0
 
 
-def defender_not_forfeited(arena):
+def defender_not_forfeited(geometry):
     """Joint nodes where the defender does not already stand in F or R, so
     the game is not over before it starts."""
-    return (np.minimum(arena.flag, arena.home) > 0)[None, None, :, :]
+    return (np.minimum(geometry.flag, geometry.home) > 0)[None, None, :, :]
 
 
-def node_states(arena, mask, count, seed=0):
+def node_states(geometry, mask, count, seed=0):
     """Up to ``count`` joint states at nodes of ``mask``, drawn without
     replacement by a seeded generator: (attacker, defender, node index)."""
     nodes = np.argwhere(mask)
     assert len(nodes) > 0
     rng = np.random.default_rng(seed)
-    x, y = arena.grid.axes()
+    x, y = geometry.grid.axes()
     picked = nodes[rng.choice(len(nodes), min(count, len(nodes)), replace=False)]
     return [((x[i], y[j]), (x[k], y[m]), (i, j, k, m)) for i, j, k, m in picked]
 
@@ -79,7 +79,7 @@ def flag_centre(game_map):
 
 @pytest.fixture(scope="module")
 def ctf10():
-    return ctf_arena(load_map("ctf-10"), N)
+    return ctf_geometry(load_map("ctf-10"), N)
 
 
 @pytest.fixture(scope="module")
@@ -92,18 +92,18 @@ def weno_all(ctf10):
 def weno_game(weno_all):
     """The two-stage game (R_A then W_A) of the WENO5 solve, without F_A."""
     sets = {name: weno_all.sets[name] for name in ("return", "win")}
-    return Guidance(CtfSolution(weno_all.arena, weno_all.rules, sets))
+    return CtfQueries(CtfSolution(weno_all.geometry, weno_all.rules, sets))
 
 
 @pytest.fixture(scope="module")
 def first_game(ctf10):
     """The two-stage game with the first-order scheme, for tests of logic."""
-    return Guidance(solve_ctf(ctf10, RULES, "both", scheme="first"))
+    return CtfQueries(solve_ctf(ctf10, RULES, "both", scheme="first"))
 
 
 @pytest.fixture(scope="module")
 def capture_only(ctf10):
-    return Guidance(solve_ctf(ctf10, RULES, "capture", scheme="first"))
+    return CtfQueries(solve_ctf(ctf10, RULES, "capture", scheme="first"))
 
 
 @pytest.fixture(scope="module")
@@ -111,37 +111,39 @@ def campus():
     """campus-200 (buildings) on a coarse grid: enough for the refusals of
     states inside an obstacle."""
     game_map = load_map("campus-200")
-    solution = solve_ctf(ctf_arena(game_map, 17), Rules(), "return", scheme="first")
-    return game_map, Guidance(solution)
+    solution = solve_ctf(ctf_geometry(game_map, 17), Rules(), "return", scheme="first")
+    return game_map, CtfQueries(solution)
 
 
 # --- closed-loop play (thesis 3.4) ---
 
 
-def attacker_states(guidance, seed=0):
-    arena = guidance.arena
-    value = guidance.solution.sets["win"].value
-    return node_states(arena, (value < -ATTACKER_DEPTH * cell(arena)) & defender_not_forfeited(arena), PLAYS, seed)
+def attacker_states(queries, seed=0):
+    geometry = queries.geometry
+    value = queries.solution.sets["win"].value
+    return node_states(
+        geometry, (value < -ATTACKER_DEPTH * cell(geometry)) & defender_not_forfeited(geometry), PLAYS, seed
+    )
 
 
-def assert_the_attacker_wins_by_returning_the_flag(guidance, states):
-    arena = guidance.arena
+def assert_the_attacker_wins_by_returning_the_flag(queries, states):
+    geometry = queries.geometry
     lost, returned = [], 0
     for xa, xd, node in states:
-        p = play(guidance, xa, xd)
+        p = play(queries, xa, xd)
         if p.winner != "attacker":
-            lost.append(f"{xa} vs {xd} (W_A value {guidance.solution.sets['win'].value[node]:.3f}): {p.reason}")
+            lost.append(f"{xa} vs {xd} (W_A value {queries.solution.sets['win'].value[node]:.3f}): {p.reason}")
             continue
         if p.reason == "returned the flag":
             returned += 1
             assert p.flag_time is not None and p.phases[-1] == "return"
             k = int(np.searchsorted(p.times, p.flag_time))
-            assert inside(arena, arena.flag, p.attacker[k])
-            assert inside(arena, arena.home, p.attacker[-1])
+            assert inside(geometry, geometry.flag, p.attacker[k])
+            assert inside(geometry, geometry.home, p.attacker[-1])
         else:
             # A losing defender may forfeit by walking into F or R.
             assert p.reason == "defender entered the flag or return region"
-            assert inside(arena, arena.flag, p.defender[-1]) or inside(arena, arena.home, p.defender[-1])
+            assert inside(geometry, geometry.flag, p.defender[-1]) or inside(geometry, geometry.home, p.defender[-1])
     assert not lost, f"the attacker lost {len(lost)} of {len(states)} states inside W_A, e.g. {lost[:3]}"
     return returned
 
@@ -171,7 +173,7 @@ def test_an_attacker_holding_the_flag_with_the_defender_far_behind_brings_it_hom
 
 def test_closed_loop_weno5_strategies_win_for_the_defender_from_deep_inside_W_D(weno_game):
     value = weno_game.solution.sets["win"].value
-    states = node_states(weno_game.arena, value > DEFENDER_DEPTH * cell(weno_game.arena), PLAYS, seed=1)
+    states = node_states(weno_game.geometry, value > DEFENDER_DEPTH * cell(weno_game.geometry), PLAYS, seed=1)
     assert len(states) >= 30
     reasons = {}
     for xa, xd, node in states:
@@ -183,7 +185,7 @@ def test_closed_loop_weno5_strategies_win_for_the_defender_from_deep_inside_W_D(
 
 def test_closed_loop_first_order_strategies_win_for_the_defender_from_deep_inside_W_D(first_game):
     value = first_game.solution.sets["win"].value
-    states = node_states(first_game.arena, value > DEFENDER_DEPTH * cell(first_game.arena), PLAYS, seed=2)
+    states = node_states(first_game.geometry, value > DEFENDER_DEPTH * cell(first_game.geometry), PLAYS, seed=2)
     assert len(states) >= 30
     for xa, xd, node in states:
         p = play(first_game, xa, xd)
@@ -193,9 +195,9 @@ def test_closed_loop_first_order_strategies_win_for_the_defender_from_deep_insid
 def test_a_defender_that_stands_still_or_walks_away_loses_where_its_strategy_wins(first_game):
     # Thesis 3.5: with only one agent aided, the attacker's strategy
     # exploits a defender that does not play the game.
-    arena = first_game.arena
+    geometry = first_game.geometry
     value = first_game.solution.sets["win"].value
-    states = node_states(arena, value > DEFENDER_DEPTH * cell(arena), 40, seed=3)
+    states = node_states(geometry, value > DEFENDER_DEPTH * cell(geometry), 40, seed=3)
 
     def stand_still(t, attacker, defender, phase):
         return None
@@ -211,7 +213,7 @@ def test_a_defender_that_stands_still_or_walks_away_loses_where_its_strategy_win
         still = play(first_game, xa, xd, defender_policy=stand_still)
         if still.winner == "attacker":
             assert still.reason == "returned the flag" and still.flag_time is not None
-            assert inside(arena, arena.home, still.attacker[-1])
+            assert inside(geometry, geometry.home, still.attacker[-1])
             assert np.all(still.defender == still.defender[0])
             exploited += 1
         walked += play(first_game, xa, xd, defender_policy=walk_away).winner == "attacker"
@@ -221,10 +223,10 @@ def test_a_defender_that_stands_still_or_walks_away_loses_where_its_strategy_win
 
 
 def test_the_attacker_switches_from_capture_to_return_at_the_flag_and_never_back(first_game):
-    arena = first_game.arena
+    geometry = first_game.geometry
     value = first_game.solution.sets["win"].value
     starts = attacker_states(first_game, seed=4)[:30]
-    starts += node_states(arena, (value > 0) & defender_not_forfeited(arena), 30, seed=5)
+    starts += node_states(geometry, (value > 0) & defender_not_forfeited(geometry), 30, seed=5)
     switched = 0
     for xa, xd, _ in starts:
         p = play(first_game, xa, xd)
@@ -237,8 +239,8 @@ def test_the_attacker_switches_from_capture_to_return_at_the_flag_and_never_back
         switched += 1
         # The switch happens at the first referee check that finds the attacker in F.
         assert p.flag_time == pytest.approx(p.times[k])
-        assert inside(arena, arena.flag, p.attacker[k])
-        assert not any(inside(arena, arena.flag, a) for a in p.attacker[:k])
+        assert inside(geometry, geometry.flag, p.attacker[k])
+        assert not any(inside(geometry, geometry.flag, a) for a in p.attacker[:k])
         assert p.duration - p.flag_time <= RULES.return_time + 1e-6
     assert switched >= 20
 
@@ -272,27 +274,27 @@ def test_first_order_values_keep_the_two_stage_game_no_easier_than_flag_capture_
 # --- guidance queries ---
 
 
-def grid_nodes(arena):
-    n0, n1 = arena.grid.shape
+def grid_nodes(geometry):
+    n0, n1 = geometry.grid.shape
     return [(0, 0), (n0 - 1, n1 - 1), (n0 // 2, n1 // 2), (3, n1 - 4), (n0 - 3, 2), (n0 // 2, n1 // 4)]
 
 
 @pytest.mark.parametrize("phase, name", [("capture", "win"), ("return", "return")])
 def test_region_masks_are_the_sign_of_the_4d_value_at_grid_nodes(first_game, phase, name):
     value = first_game.solution.sets[name].value
-    x, y = first_game.arena.grid.axes()
-    for i, j in grid_nodes(first_game.arena):
+    x, y = first_game.geometry.grid.axes()
+    for i, j in grid_nodes(first_game.geometry):
         np.testing.assert_array_equal(first_game.defender_region((x[i], y[j]), phase), value[i, j] > 0)
         np.testing.assert_array_equal(first_game.attacker_region((x[i], y[j]), phase), value[:, :, i, j] <= 0)
         np.testing.assert_array_equal(first_game.defender_region_values((x[i], y[j]), phase), value[i, j])
 
 
 def test_region_polygons_match_the_masks_in_area_and_place(first_game):
-    arena = first_game.arena
-    h = cell(arena)
-    x, y = arena.grid.axes()
+    geometry = first_game.geometry
+    h = cell(geometry)
+    x, y = geometry.grid.axes()
     checked = 0
-    for i, j in grid_nodes(arena):
+    for i, j in grid_nodes(geometry):
         for phase in ("capture", "return"):
             for side, values in (
                 ("defender", first_game.defender_region_values((x[i], y[j]), phase)),
@@ -300,8 +302,8 @@ def test_region_polygons_match_the_masks_in_area_and_place(first_game):
             ):
                 mask = values > 0 if side == "defender" else values <= 0
                 shape = first_game.polygons(values, side)
-                count_area = mask.sum() * arena.grid.cell_area
-                assert abs(shape.area - count_area) <= h * shape.length + arena.grid.cell_area
+                count_area = mask.sum() * geometry.grid.cell_area
+                assert abs(shape.area - count_area) <= h * shape.length + geometry.grid.cell_area
                 # Nodes clearly on one side are on the same side of the outline.
                 sure = far_from_boundary(mask, 1.5)
                 for a, b in np.argwhere(sure)[::7]:
@@ -311,9 +313,9 @@ def test_region_polygons_match_the_masks_in_area_and_place(first_game):
 
 
 def test_region_polygons_are_valid_geometries(first_game):
-    arena = first_game.arena
-    x, y = arena.grid.axes()
-    nodes = grid_nodes(arena) + [arena.grid.nearest_index(flag_centre(load_map("ctf-10")))]
+    geometry = first_game.geometry
+    x, y = geometry.grid.axes()
+    nodes = grid_nodes(geometry) + [geometry.grid.nearest_index(flag_centre(load_map("ctf-10")))]
     invalid = []
     for i, j in nodes:
         for phase in ("capture", "return"):
@@ -328,13 +330,13 @@ def test_region_polygons_are_valid_geometries(first_game):
 
 
 def test_headings_are_unit_vectors(first_game, weno_game):
-    for guidance in (first_game, weno_game):
+    for queries in (first_game, weno_game):
         for phase in ("capture", "return"):
-            for xa, xd, _ in node_states(guidance.arena, np.ones(guidance.solution.grid.shape, bool), 50, seed=6):
+            for xa, xd, _ in node_states(queries.geometry, np.ones(queries.solution.grid.shape, bool), 50, seed=6):
                 # Off the nodes too: a third of a cell north-east.
-                shift = cell(guidance.arena) / 3
-                xa = np.minimum(np.add(xa, shift), guidance.arena.grid.hi)
-                report = guidance.evaluate(xa, xd, phase)
+                shift = cell(queries.geometry) / 3
+                xa = np.minimum(np.add(xa, shift), queries.geometry.grid.hi)
+                report = queries.evaluate(xa, xd, phase)
                 for heading in (report.attacker_heading, report.defender_heading):
                     if heading is not None:
                         assert np.hypot(*heading) == pytest.approx(1.0, abs=1e-9)
@@ -342,7 +344,7 @@ def test_headings_are_unit_vectors(first_game, weno_game):
 
 
 def test_states_off_the_grid_are_refused_naming_the_player(first_game):
-    (xmin, ymin), (xmax, ymax) = first_game.arena.grid.lo, first_game.arena.grid.hi
+    (xmin, ymin), (xmax, ymax) = first_game.geometry.grid.lo, first_game.geometry.grid.hi
     mid = ((xmin + xmax) / 2, (ymin + ymax) / 2)
     with pytest.raises(InputError, match=r"attacker .* off the game's grid"):
         first_game.evaluate((xmin - 0.5, mid[1]), mid)
@@ -357,25 +359,25 @@ def test_states_off_the_grid_are_refused_naming_the_player(first_game):
 
 
 def test_states_inside_a_building_are_refused_naming_the_player(campus):
-    game_map, guidance = campus
+    game_map, queries = campus
     building = max(game_map.obstacles, key=lambda o: o.area).centroid.coords[0]
     (home,) = game_map.regions_with_role("return")
     free = home.geometry.representative_point().coords[0]
-    assert not guidance.arena.free[guidance.arena.grid.nearest_index(building)]
-    guidance.evaluate(free, (free[0] + 20.0, free[1]), "return")  # a free state is answered
+    assert not queries.geometry.free[queries.geometry.grid.nearest_index(building)]
+    queries.evaluate(free, (free[0] + 20.0, free[1]), "return")  # a free state is answered
     with pytest.raises(InputError, match=r"attacker .* inside an obstacle"):
-        guidance.evaluate(building, free, "return")
+        queries.evaluate(building, free, "return")
     with pytest.raises(InputError, match=r"defender .* inside an obstacle"):
-        guidance.evaluate(free, building, "return")
+        queries.evaluate(free, building, "return")
     with pytest.raises(InputError, match="defender"):
-        guidance.attacker_region(building, "return")
+        queries.attacker_region(building, "return")
     with pytest.raises(InputError, match="attacker"):
-        play(guidance, building, free)
+        play(queries, building, free)
 
 
 def test_the_return_phase_of_a_game_solved_for_flag_capture_only_is_refused(capture_only):
-    arena = capture_only.arena
-    (xmin, ymin), (xmax, _) = arena.grid.lo, arena.grid.hi
+    geometry = capture_only.geometry
+    (xmin, ymin), (xmax, _) = geometry.grid.lo, geometry.grid.hi
     a, d = (xmin + 1.0, ymin + 1.0), (xmax - 1.0, ymin + 1.0)
     assert capture_only.evaluate(a, d, "capture").value == pytest.approx(capture_only.evaluate(a, d).value)
     with pytest.raises(InputError, match="R_A"):
@@ -450,13 +452,13 @@ def test_an_empty_cache_file_is_solved_again(game, tmp_path):
 
 def test_a_map_without_a_flag_is_refused():
     with pytest.raises(MapError, match="flag"):
-        ctf_arena(load_map("square-10"), 21)
+        ctf_geometry(load_map("square-10"), 21)
 
 
 @pytest.mark.parametrize("grid_points", [3, 8, 21.0])
 def test_too_few_or_fractional_grid_points_are_refused(grid_points):
     with pytest.raises(MapError, match="grid"):
-        ctf_arena(load_map("ctf-10"), grid_points)
+        ctf_geometry(load_map("ctf-10"), grid_points)
 
 
 @pytest.mark.parametrize(
@@ -475,12 +477,12 @@ def test_bad_rules_are_refused_naming_the_rule(field, value):
 
 
 def test_a_game_too_large_for_the_memory_limit_is_refused_before_allocating():
-    arena = ctf_arena(load_map("ctf-10"), 61)  # 61^4 states: 55 MB a float32 array
-    assert required_game_bytes(arena, "both", scheme="weno5") > 300e6
+    geometry = ctf_geometry(load_map("ctf-10"), 61)  # 61^4 states: 55 MB a float32 array
+    assert required_game_bytes(geometry, "both", scheme="weno5") > 300e6
     tracemalloc.start()
     try:
         with pytest.raises(InputError, match=r"needs about \d+\.\d+ GB .* only 0\.00 GB"):
-            solve_ctf(arena, RULES, "both", memory_limit=1000)
+            solve_ctf(geometry, RULES, "both", memory_limit=1000)
         peak = tracemalloc.get_traced_memory()[1]
     finally:
         tracemalloc.stop()

@@ -8,28 +8,28 @@ import pytest
 from scipy import ndimage
 from scipy.interpolate import RegularGridInterpolator
 
-from bearcat.agents.ground_station.ctf_arena import ctf_arena
 from bearcat.maps import load_map
+from bearcat.maps.ctf import ctf_geometry
 from bearcat.solvers.ctf import Rules, solve_ctf
 
 RULES = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.5, capture_time=6.0, return_time=6.0)
 
 
 def flag_return(n):
-    arena = ctf_arena(load_map("ctf-10"), n)
-    solution = solve_ctf(arena, RULES, "return")
-    return arena, solution.sets["return"].value
+    geometry = ctf_geometry(load_map("ctf-10"), n)
+    solution = solve_ctf(geometry, RULES, "return")
+    return geometry, solution.sets["return"].value
 
 
 @pytest.mark.slow
 def test_the_flag_return_boundary_moves_less_than_a_cell_from_35_to_45_points():
-    coarse_arena, coarse = flag_return(35)
-    fine_arena, fine = flag_return(45)
-    axes = coarse_arena.grid.axes() * 2
+    coarse_geometry, coarse = flag_return(35)
+    fine_geometry, fine = flag_return(45)
+    axes = coarse_geometry.grid.axes() * 2
     # The coarse value at the fine nodes; float64 so the comparison is of
     # the sets, not of rounding.
     at_fine = RegularGridInterpolator(axes, coarse.astype(np.float64))(
-        np.stack(np.meshgrid(*(fine_arena.grid.axes() * 2), indexing="ij"), axis=-1).reshape(-1, 4)
+        np.stack(np.meshgrid(*(fine_geometry.grid.axes() * 2), indexing="ij"), axis=-1).reshape(-1, 4)
     ).reshape(fine.shape)
     fine_set, coarse_set = fine <= 0, at_fine <= 0
     assert 0.2 < fine_set.mean() < 0.95

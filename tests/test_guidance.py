@@ -1,17 +1,29 @@
 """The ground station's advisors answer from fixes as the solvers would from
 the true positions: the open-loop path and safe set, the pursuit cell and
-boundaries, and positions a fix put inside a building moved out first."""
+boundaries, and positions a fix put inside a building moved out first.
+Regions go out as GeoJSON-ordered ``[lon, lat]`` rings and land on the
+phone's screen where the solver put them."""
 
 import numpy as np
 import pytest
+import shapely
+from scipy import ndimage
 
-from bearcat.agents.ground_station.guidance import GuidanceService, ReachAvoidAdvisor, _Fixes
-from bearcat.bus.messages import Fix
+from bearcat.agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.human.phone import Phone
+from bearcat.bus import keys
+from bearcat.bus.codec import decode, encode
+from bearcat.bus.messages import Fix, Guidance
 from bearcat.maps import load_map
+from bearcat.maps.ctf import ctf_geometry
+from bearcat.netem.models import CompassError, GpsError
+from bearcat.solvers.ctf import Rules, solve_ctf
+from bearcat.solvers.ctf_queries import CtfQueries
 
 
 def fixes_at(game_map, positions):
-    fixes = _Fixes(game_map)
+    fixes = LatestFixes(game_map)
     for k, (agent, (x, y)) in enumerate(positions.items()):
         lat, lon = game_map.to_geodetic(x, y)
         fixes.take(Fix(agent=agent, seq=1, t=1.0 + 0.01 * k, lat=lat, lon=lon))
@@ -32,7 +44,7 @@ def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
     fixes = fixes_at(campus, {"a": (370.0, 30.0), "d1": (120.0, 150.0), "d2": (330.0, 200.0)})
     shown = advisor("a", fixes, 2.0)
     assert shown["go"] is True and 0 <= shown["heading"] < 360
-    path = np.array([campus.to_local(lat, lon) for lat, lon in shown["boundary"][0]])
+    path = np.array([campus.to_local(lat, lon) for lon, lat in shown["boundary"][0]])
     assert np.hypot(*(path[0] - (370.0, 30.0))) < 3.0
     assert campus.region("home").geometry.distance(__import__("shapely").Point(path[-1])) < 3.0
     # The heading points along the first stretch of the path.
@@ -88,3 +100,58 @@ def test_positions_only_guidance_for_an_unaided_agent(agent):
     service = GuidanceService("g", field, [agent], rate=10.0)
     (send,) = service.tick(0.1)
     assert send.message.game == "none" and send.message.heading is None and send.message.region == []
+
+
+def sent_to(agent, game_map, fixes, fields) -> Guidance:
+    """The guidance ``agent`` receives with ``fields``: encoded and decoded as on the bus."""
+    message = Guidance(agent=agent, seq=1, t=2.0, reports=fixes.reports(), **fields)
+    return decode(encode(message), keys.guidance("g", agent))
+
+
+def in_metres(game_map, ring) -> shapely.Polygon:
+    """A ring of the wire read by the message's documented order, ``[lon, lat]``."""
+    lon, lat = np.asarray(ring).T
+    return shapely.Polygon(np.column_stack(game_map.to_local(lat, lon)))
+
+
+def test_a_ctf_region_reads_as_lon_lat_rings_where_the_solver_puts_it():
+    """Read as ``[lon, lat]``, the defender's winning region the attacker is
+    sent has the solver's area and covers the nodes of the solver's mask, and
+    no node well outside it; the phone's screen shows the same region."""
+    ctf10 = load_map("ctf-10")
+    queries = CtfQueries(solve_ctf(ctf_geometry(ctf10, 21), Rules(), "return", scheme="first"))
+    advisor = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+    attacker = np.array([5.0, 3.0])
+    fixes = fixes_at(ctf10, {"a": tuple(attacker), "d": (2.0, 6.0)})
+    sent = sent_to("a", ctf10, fixes, advisor("a", fixes, 2.0))
+    assert sent.region_of == "d" and sent.region
+    received = shapely.union_all([in_metres(ctf10, ring) for ring in sent.region])
+
+    values = queries.defender_region_values(attacker, "return")
+    solver = shapely.union_all(
+        [shapely.Polygon(p.exterior) for p in shapely.get_parts(queries.polygons(values, "defender"))]
+    )
+    assert received.area == pytest.approx(solver.area, rel=1e-3)
+    assert received.symmetric_difference(solver).area < 1e-3 * solver.area
+
+    x, y = np.meshgrid(*queries.geometry.grid.axes(), indexing="ij")
+    inside = values > 0
+    outside = ndimage.binary_erosion(~ndimage.binary_fill_holes(inside), border_value=1)
+    assert inside.sum() > 10 and outside.sum() > 10
+    phone = Phone("a", ctf10, gps=GpsError(), compass=CompassError(), rng=np.random.default_rng(0))
+    phone.show(sent, 2.1)
+    for mask, expected in ((inside, True), (outside, False)):
+        nodes = np.column_stack([x[mask], y[mask]])
+        assert all(received.buffer(1e-6).covers(shapely.Point(p)) == expected for p in nodes)
+        assert all(phone.screen.in_region(p) == expected for p in nodes)
+
+
+def test_a_pursuit_cell_reads_as_lon_lat_ring_of_the_area_sent_as_value():
+    field = load_map("field-50")
+    advisor = PursuitAdvisor(field, evader="e", pursuers=["p1", "p2"])
+    fixes = fixes_at(field, {"e": (25.0, 25.0), "p1": (10.0, 10.0), "p2": (40.0, 12.0)})
+    sent = sent_to("p1", field, fixes, advisor("p1", fixes, 2.0))
+    (ring,) = sent.region
+    cell = in_metres(field, ring)
+    assert cell.is_valid and cell.area == pytest.approx(sent.value, rel=1e-4)
+    assert cell.contains(shapely.Point(25.0, 25.0)) and not cell.contains(shapely.Point(10.0, 10.0))

@@ -128,7 +128,7 @@ def test_uav_tables_are_checked_key_by_key():
 def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario):
     """The phone's value is the worst over P_D: go with P_D in a corner where
     the defender loses, no go once P_D also holds a place where it wins."""
-    from bearcat.agents.ground_station.guidance import _Fixes
+    from bearcat.agents.ground_station.guidance.fixes import LatestFixes
     from bearcat.bus.messages import Fix
     from bearcat.scenarios.cast import _CtfGame
 
@@ -137,7 +137,7 @@ def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario
     tasker = game.tasker()
     solved = game.solved()
     attacker = np.array([125.0, 150.0])  # north of the hall, 35 m short of home
-    fixes = _Fixes(scenario.map)
+    fixes = LatestFixes(scenario.map)
     lat, lon = scenario.map.to_geodetic(*attacker)
     fixes.take(Fix(agent="attacker", seq=1, t=1.0, lat=lat, lon=lon))
     x, y = np.meshgrid(*tasker.grid.axes(), indexing="ij")

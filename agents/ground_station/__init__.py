@@ -1,3 +1,3 @@
-"""Guidance service, referee, UAV tasking and recorder. So far: the
-capture-the-flag arena of a map (``ctf_arena``) and the on-disk cache of
-solved games (``ctf_cache``) the guidance service will answer from."""
+"""The ground station: the guidance service and its advisors, the referee,
+UAV tasking, the on-disk cache of solved capture-the-flag games
+(``ctf_cache``) and the run's recording."""

@@ -26,8 +26,8 @@ from pathlib import Path
 
 import numpy as np
 
-from bearcat.agents.ground_station.ctf_arena import ctf_arena
 from bearcat.maps import Map
+from bearcat.maps.ctf import ctf_geometry
 from bearcat.maps.geojson import dumps
 from bearcat.solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
 
@@ -134,17 +134,17 @@ def load_or_solve(
     """The sets of ``stages``, from the cache where present, solved (and
     stored) where not."""
     directory = (root or cache_root()) / "ctf"
-    arena = ctf_arena(game.map, game.grid_points)
+    geometry = ctf_geometry(game.map, game.grid_points)
     known, sources, paths = {}, {}, {}
     for name in STAGES.get(stages, ()):
         paths[name] = directory / f"{game.set_key(name)}.npy"
         if use_cache:
-            loaded = _load(paths[name], arena.joint_grid().shape)
+            loaded = _load(paths[name], geometry.joint_grid().shape)
             if loaded is not None:
                 known[name] = loaded
                 sources[name] = "cache"
     solution = solve_ctf(
-        arena,
+        geometry,
         game.rules,
         stages,
         scheme=game.scheme,

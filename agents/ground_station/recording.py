@@ -145,9 +145,9 @@ def _log_fix(rec, rr, m, to_local, colour_of) -> None:
 def _log_screen(rec, rr, m, to_local, colour_of) -> None:
     agent = m["agent"]
     base = f"phone/{agent}"
-    rings = [np.array([to_local(lat, lon) for lat, lon in ring]) for ring in m.get("region", []) if ring]
+    rings = [np.array([to_local(lat, lon) for lon, lat in ring]) for ring in m.get("region", []) if ring]
     rec.log(f"{base}/region", rr.LineStrips2D(rings, colors=[(230, 60, 160)]) if rings else rr.Clear(recursive=False))
-    possible = [np.array([to_local(lat, lon) for lat, lon in ring]) for ring in m.get("possible", []) if ring]
+    possible = [np.array([to_local(lat, lon) for lon, lat in ring]) for ring in m.get("possible", []) if ring]
     if possible or m.get("game") == "search":
         rec.log(
             f"{base}/possible",

@@ -32,7 +32,7 @@ from bearcat.bus.messages import Detection, Fix, GameState, Message, UavTask
 from bearcat.maps import Map
 from bearcat.maps.raster import rasterize
 from bearcat.solvers import search
-from bearcat.solvers.ctf_guidance import Guidance as CtfGuidance
+from bearcat.solvers.ctf_queries import CtfQueries
 from bearcat.solvers.errors import InputError
 
 PERIOD = 1.0  # s between updates and tasks
@@ -79,7 +79,7 @@ class UavTasker:
         defender_start,
         defender_speed: float,
         strategy: str = "reachability",
-        ctf: CtfGuidance | None = None,
+        ctf: CtfQueries | None = None,
         sight,
         spacing: float = 2.0,
         name: str = "uav-tasking",
@@ -253,5 +253,5 @@ class UavTasker:
             values = self.ctf.defender_region_values(attacker, self._phase)
         except InputError:  # the attacker's fix is off the solver's grid or in a building
             return None
-        sample = RegularGridInterpolator(self.ctf.arena.grid.axes(), values, bounds_error=False, fill_value=-1.0)
+        sample = RegularGridInterpolator(self.ctf.geometry.grid.axes(), values, bounds_error=False, fill_value=-1.0)
         return sample(self._nodes)

@@ -134,9 +134,10 @@ class Phone:
                 s.reports[r.agent] = Sighting(np.array(self.map.to_local(r.lat, r.lon)), r.t)
 
     def _to_local(self, points) -> np.ndarray:
+        """A ring or line of the wire's ``[lon, lat]`` points in map metres."""
         if not points:
             return np.zeros((0, 2))
-        lat, lon = np.asarray(points, float).T
+        lon, lat = np.asarray(points, float).T
         return np.stack(self.map.to_local(lat, lon), axis=1)
 
 

@@ -26,8 +26,8 @@ from bearcat.agents.ground_station.ctf_cache import (
 from bearcat.maps import load_map
 from bearcat.maps.geodesy import bearing
 from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
-from bearcat.solvers.ctf_guidance import Guidance
 from bearcat.solvers.ctf_playout import play
+from bearcat.solvers.ctf_queries import CtfQueries
 from bearcat.solvers.hji import SCHEMES
 
 DEFAULT_GRID = 45
@@ -227,8 +227,7 @@ def solve_game(args) -> tuple[CtfGame, Solved, float]:
 
 def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
     rows = []
-    arena = solved.solution.arena
-    free = arena.free
+    free = solved.solution.geometry.free
     joint_free = free[:, :, None, None] & free[None, None, :, :]
     for name, found in solved.solution.sets.items():
         wins = (found.value <= 0) & joint_free
@@ -293,7 +292,7 @@ def bearing_deg(heading) -> float | None:
 
 def run_query(args) -> int:
     game, solved, _seconds = solve_game(args)
-    guidance = Guidance(solved.solution)
+    guidance = CtfQueries(solved.solution)
     phase = args.phase or ("return" if args.stages == "return" else "capture")
     report = guidance.evaluate(args.attacker, args.defender, phase)
     defender_values = guidance.defender_region_values(args.attacker, phase)
@@ -345,7 +344,7 @@ def run_query(args) -> int:
 
 def run_play(args) -> int:
     game, solved, _ = solve_game(args)
-    guidance = Guidance(solved.solution)
+    guidance = CtfQueries(solved.solution)
     outcome = play(guidance, args.attacker, args.defender)
     start = guidance.evaluate(args.attacker, args.defender, outcome.phases[0])
     print(f"start: value {start.value:+.3f} m, {start.winner} predicted to win")

@@ -1,15 +1,16 @@
-"""Live guidance from a solved capture-the-flag game: what the phones of
-thesis 3.5 showed, answered for the current positions.
+"""Queries on a solved capture-the-flag game: what the phones of thesis 3.5
+showed, answered for the current positions.
 
 For a state ``(x_a, x_d)`` and the phase of play (``"capture"`` until the
-attacker holds the flag, ``"return"`` after), ``Guidance`` gives the value
+attacker holds the flag, ``"return"`` after), ``CtfQueries`` gives the value
 (the margin, in metres: negative where the attacker wins), the winner, each
 side's optimal heading (eqs. 3.12-3.13 from the value's gradient) and the
 opponent's winning region on the map: ``R_D(x_a)``, the defender positions
 that win against the attacker where it stands, and ``R_A(x_d)``, the
 attacker positions that win against the defender (Fig. 3.6, 3.9). Regions
-come as a 2-D mask on the arena grid and as polygons in map metres traced at
-the zero level of the interpolated value, so their edges sit between nodes.
+come as a 2-D mask on the grid of one player and as polygons in map metres
+traced at the zero level of the interpolated value, so their edges sit
+between nodes.
 
 Values are multilinear in the 4-D grid; gradients are central differences
 at the nodes (one-sided on the edges), interpolated the same way, which
@@ -31,7 +32,7 @@ import shapely
 from bearcat.solvers.ctf import EDGE_SLACK, CtfSolution, SetSolution
 from bearcat.solvers.errors import InputError
 
-__all__ = ["PHASES", "Guidance", "StateReport"]
+__all__ = ["PHASES", "CtfQueries", "StateReport"]
 
 PHASES = ("capture", "return")
 
@@ -51,14 +52,14 @@ class StateReport:
         return "attacker" if self.value <= 0 else "defender"
 
 
-class Guidance:
+class CtfQueries:
     """Queries on one solved game; cheap enough to answer every player ten
     times a second (see ``benchmarks/hji.py``)."""
 
     def __init__(self, solution: CtfSolution) -> None:
         self.solution = solution
-        self.arena = solution.arena
-        grid = self.arena.grid
+        self.geometry = solution.geometry
+        grid = self.geometry.grid
         self._lo = np.asarray(grid.lo * 2, np.float64)
         self._spacing = np.asarray(grid.spacing * 2, np.float64)
         self._axes = grid.axes()
@@ -88,8 +89,8 @@ class Guidance:
             x, y = (float(v) for v in point)
         except (TypeError, ValueError):
             raise InputError(f"{who} position {point!r} is not a pair of numbers (x, y)") from None
-        if not self.arena.grid.contains((x, y)):
-            (xmin, ymin), (xmax, ymax) = self.arena.grid.lo, self.arena.grid.hi
+        if not self.geometry.grid.contains((x, y)):
+            (xmin, ymin), (xmax, ymax) = self.geometry.grid.lo, self.geometry.grid.hi
             raise InputError(
                 f"{who} at ({x:.2f}, {y:.2f}) is off the game's grid [{xmin:g}, {xmax:g}] x [{ymin:g}, {ymax:g}]"
             )
@@ -98,8 +99,10 @@ class Guidance:
         return np.array([x, y])
 
     def blocked_at(self, point) -> bool:
-        g = self.arena.grid
-        distance = interpolate_2d(self.arena.blocked, np.asarray(g.lo), np.asarray(g.spacing), np.asarray(point, float))
+        g = self.geometry.grid
+        distance = interpolate_2d(
+            self.geometry.blocked, np.asarray(g.lo), np.asarray(g.spacing), np.asarray(point, float)
+        )
         return distance < -EDGE_SLACK * min(g.spacing)
 
     def evaluate(self, attacker, defender, phase: str = "capture") -> StateReport:
@@ -138,11 +141,11 @@ class Guidance:
         return _slice(self.value_set(phase).value, self._lo[2:], self._spacing[2:], point, False)
 
     def defender_region(self, attacker, phase: str = "capture") -> np.ndarray:
-        """R_D(x_a) as a mask over the arena grid."""
+        """R_D(x_a) as a mask over the grid of one player."""
         return self.defender_region_values(attacker, phase) > 0
 
     def attacker_region(self, defender, phase: str = "capture") -> np.ndarray:
-        """R_A(x_d) as a mask over the arena grid."""
+        """R_A(x_d) as a mask over the grid of one player."""
         return self.attacker_region_values(defender, phase) <= 0
 
     def polygons(self, values: np.ndarray, side: str):

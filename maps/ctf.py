@@ -7,18 +7,21 @@ import numpy as np
 import shapely
 from shapely.geometry import box
 
-from bearcat.maps import Map, MapError, rasterize
 from bearcat.maps.distance import signed_distance
-from bearcat.solvers.ctf import Arena
+from bearcat.maps.errors import MapError
+from bearcat.maps.model import Map
+from bearcat.maps.raster import rasterize
+from bearcat.solvers.ctf import CtfGeometry
 from bearcat.solvers.grid import Grid
 
 MIN_GRID_POINTS = 9
 
 
-def ctf_arena(game_map: Map, grid_points: int) -> Arena:
-    """The arena of ``game_map`` on ``grid_points`` nodes per axis spanning
-    its bounds, so the grid's edges are the area's edges. Flag and return
-    regions are the unions of the map's regions with those roles."""
+def ctf_geometry(game_map: Map, grid_points: int) -> CtfGeometry:
+    """The capture-the-flag geometry of ``game_map`` on ``grid_points`` nodes
+    per axis spanning its bounds, so the grid's edges are the area's edges.
+    Flag and return regions are the unions of the map's regions with those
+    roles."""
     if not isinstance(grid_points, int) or grid_points < MIN_GRID_POINTS:
         raise MapError(f"a capture-the-flag grid needs at least {MIN_GRID_POINTS} points per axis, got {grid_points!r}")
     xmin, ymin, xmax, ymax = game_map.bounds
@@ -31,7 +34,7 @@ def ctf_arena(game_map: Map, grid_points: int) -> Arena:
         blocked_distance = np.full(grid.shape, 2.0 * float(np.hypot(xmax - xmin, ymax - ymin)))
     else:
         blocked_distance = signed_distance(blocked, grid)
-    arena_args = dict(
+    fields = dict(
         grid=grid,
         blocked=blocked_distance,
         flag=signed_distance(flag, grid),
@@ -39,12 +42,12 @@ def ctf_arena(game_map: Map, grid_points: int) -> Arena:
         terrain=rasterize(game_map, grid=grid).speed,
     )
     for name, label in (("flag", "flag"), ("home", "return")):
-        if not (arena_args[name] <= 0).any():
+        if not (fields[name] <= 0).any():
             raise MapError(
                 f"the {label} region of map {game_map.name} covers no node of a {grid_points} x {grid_points} "
                 "grid; use more grid points"
             )
-    return Arena(**arena_args)
+    return CtfGeometry(**fields)
 
 
 def _role_union(game_map: Map, role: str):

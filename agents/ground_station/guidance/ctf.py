@@ -1,0 +1,86 @@
+"""Capture-the-flag guidance (thesis 3.5): the attacker's phone shows the
+defender's winning region R_D(x_a), its optimal heading and go (the reported
+state is an attacker win); the defender's shows R_A(x_d) and its heading."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes, nearest_inside
+from bearcat.agents.ground_station.guidance.outlines import on_the_wire, polygon_rings
+from bearcat.bus.messages import GameState
+from bearcat.maps import Map
+from bearcat.maps.geodesy import bearing
+from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.errors import InputError
+
+
+class CtfAdvisor:
+    """The CTF fields of a phone's guidance, from the solved sets of one game."""
+
+    def __init__(self, game_map: Map, solved: CtfQueries, *, attacker: str, defender: str, phase: str = "capture"):
+        self.map = game_map
+        self.solved = solved
+        self.attacker, self.defender = attacker, defender
+        self.phase = phase
+        spacing = min(solved.geometry.grid.spacing)
+        # Fixes outside the free space go to its nearest point a whisker inside.
+        self._inside = game_map.free_space.buffer(-0.05 * spacing)
+        self._simplify = 0.25 * spacing
+        self._last: dict[str, tuple[tuple, dict]] = {}
+
+    def state(self, message: GameState) -> None:
+        self.phase = "capture" if message.flag_holder is None else "return"
+
+    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
+        """The CTF fields of ``agent``'s guidance. They depend only on the two
+        latest fixes and the phase, which change about once a second while
+        guidance goes out ten times, so the last answer per agent is kept."""
+        latest = fixes.latest
+        if self.attacker not in latest or self.defender not in latest:
+            return {"game": "ctf", "note": "waiting for both players' fixes"}
+        a, d = latest[self.attacker][0], latest[self.defender][0]
+        key = (a[0], a[1], d[0], d[1], self.phase)
+        held = self._last.get(agent)
+        if held is None or held[0] != key:
+            held = self._last[agent] = (key, self.answer_at(agent, a, d))
+        return held[1]
+
+    def answer_at(self, agent: str, a: np.ndarray, d: np.ndarray) -> dict:
+        """The CTF fields of ``agent``'s guidance with the attacker at ``a`` and
+        the defender at ``d`` (map metres; moved out of buildings first)."""
+        try:
+            a = self._placeable(a)
+            d = self._placeable(d)
+            report = self.solved.evaluate(a, d, self.phase)
+        except InputError as exc:
+            return {"game": "ctf", "note": str(exc)[:200]}
+        if agent == self.attacker:
+            values, side, region_of, heading = (
+                self.solved.defender_region_values(a, self.phase),
+                "defender",
+                self.defender,
+                report.attacker_heading,
+            )
+        else:
+            values, side, region_of, heading = (
+                self.solved.attacker_region_values(d, self.phase),
+                "attacker",
+                self.attacker,
+                report.defender_heading,
+            )
+        region = polygon_rings(self.solved.polygons(values, side), self._simplify)
+        return {
+            "game": "ctf",
+            "heading": None if heading is None else bearing(*heading),
+            "region": on_the_wire(self.map, region),
+            "region_of": region_of,
+            "go": report.winner == "attacker" if agent == self.attacker else None,
+            "value": float(report.value),
+        }
+
+    def _placeable(self, p: np.ndarray) -> np.ndarray:
+        """``p``, or the nearest point of the free space if a fix put it in a building or off the map."""
+        if self.solved.geometry.grid.contains(p) and not self.solved.blocked_at(p):
+            return p
+        return nearest_inside(self._inside, p)

@@ -1,0 +1,67 @@
+"""Cooperative pursuit guidance in a convex field (thesis 5.4)."""
+
+from __future__ import annotations
+
+import numpy as np
+import shapely
+
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.guidance.outlines import on_the_wire
+from bearcat.bus.messages import GameState
+from bearcat.maps import Map
+from bearcat.maps.geodesy import bearing
+from bearcat.solvers.errors import InputError
+
+
+class PursuitAdvisor:
+    """Each pursuer's phone shows the evader's safe-reachable set S_e (its
+    Voronoi cell), the pursuer's own active boundary of it, and the heading
+    that shrinks its area fastest (eq. 5.11; straight at the evader for a
+    pursuer without a boundary); ``value`` is the area of S_e in square
+    metres."""
+
+    def __init__(self, game_map: Map, *, evader: str, pursuers) -> None:
+        from bearcat.solvers.pursuit import area_minimising_headings, voronoi_cell
+
+        self.map = game_map
+        self.evader, self.pursuers = evader, tuple(pursuers)
+        ring = np.asarray(game_map.area.exterior.coords)[:-1]
+        self.domain = ring if game_map.area.exterior.is_ccw else ring[::-1]
+        self._headings, self._cell = area_minimising_headings, voronoi_cell
+        self._last: dict[str, tuple[tuple, dict]] = {}
+
+    def state(self, message: GameState) -> None:
+        pass
+
+    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
+        latest = fixes.latest
+        if agent not in self.pursuers or any(a not in latest for a in (self.evader, *self.pursuers)):
+            return {"game": "pursuit", "note": "waiting for every player's fixes"}
+        e = latest[self.evader][0]
+        ps = np.array([latest[p][0] for p in self.pursuers])
+        key = (tuple(e), ps.tobytes())
+        held = self._last.get(agent)
+        if held is None or held[0] != key:
+            held = self._last[agent] = (key, self._answer(agent, e, ps))
+        return held[1]
+
+    def _answer(self, agent: str, e: np.ndarray, ps: np.ndarray) -> dict:
+        k = self.pursuers.index(agent)
+        try:
+            heading = self._headings(self.domain, e, ps)[k]
+            cell = self._cell(self.domain, e, ps)
+        except InputError as exc:
+            return {"game": "pursuit", "note": str(exc)[:200]}
+        # Pursuer k's active boundary: the cell's corners as far from it as from the evader.
+        on_line = [
+            v for v in cell if abs(np.hypot(*(v - ps[k])) - np.hypot(*(v - e))) < 1e-6 * max(1.0, np.hypot(*(v - e)))
+        ]
+        area = shapely.Polygon(cell).area if len(cell) >= 3 else 0.0
+        fields = {"game": "pursuit", "region_of": self.evader, "value": float(area)}
+        if np.any(heading):
+            fields["heading"] = bearing(*heading)
+        if len(cell) >= 3:
+            fields["region"] = on_the_wire(self.map, [np.vstack([cell, cell[:1]])])
+        if len(on_line) >= 2:
+            fields["boundary"] = on_the_wire(self.map, [np.array(on_line[:2])])
+        return fields

@@ -1,0 +1,57 @@
+"""Capture-the-flag guidance under limited visibility (thesis 6.2)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.guidance.outlines import mask_rings, on_the_wire
+from bearcat.bus.messages import GameState
+
+
+class SearchAdvisor:
+    """The CTF answer from what the agent's side knows; and for the side that
+    flies the UAV, where the unseen defender may be (P_D, from its tasker)
+    and the answer against the worst of those places: the value is the
+    largest over P_D, so "go" means the attacker wins wherever the defender
+    is, seen or not (``worst_case``). P_D grows with the time since the
+    defender was last seen, so a stale sighting counts for what it is
+    worth."""
+
+    def __init__(self, ctf: CtfAdvisor, tasker, side) -> None:
+        self.ctf = ctf
+        self.tasker = tasker
+        self.side = frozenset(side)
+        self._drawn: tuple[int, list] = (-1, [])
+        self._worst: tuple[tuple, dict | None] = ((), None)
+
+    def state(self, message: GameState) -> None:
+        self.ctf.state(message)
+
+    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
+        fields = {**self.ctf(agent, fixes, now), "game": "search"}
+        if agent in self.side:
+            fields["possible"] = self._possible()
+            if self.ctf.attacker in fixes.latest:
+                fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0]))
+        return fields
+
+    def _against_the_worst(self, agent: str, a: np.ndarray) -> dict:
+        key = (agent, a[0], a[1], self.tasker.picture.updates, self.ctf.phase)
+        if self._worst[0] != key:
+            worst = self.tasker.worst_case(a)
+            answer = None
+            if worst is not None:
+                answer = self.ctf.answer_at(agent, a, np.asarray(worst))
+                answer = {k: answer[k] for k in ("heading", "value", "go") if k in answer}
+                answer["worst_case"] = "value" in answer
+            self._worst = (key, answer)
+        return self._worst[1] or {}
+
+    def _possible(self) -> list:
+        """P_D's outlines, redrawn only when the tasker updated it (once a second)."""
+        picture = self.tasker.picture
+        if picture.updates != self._drawn[0]:
+            self._drawn = (picture.updates, on_the_wire(self.ctf.map, mask_rings(self.tasker.grid, picture.possible)))
+        return self._drawn[1]
