@@ -6,7 +6,9 @@ both return the messages to send. ``peer`` tells it that a peer's
 liveliness token appeared or vanished (for the agents that ``watch``).
 No sockets, threads, sleeps or clocks inside: the simulation runtime calls
 these in virtual time, the live one from its asyncio loop, and an agent
-behaves the same in both.
+behaves the same in both. An exception out of any of these is the agent's
+own bug: both runtimes record it as a ``failed`` event, send nothing for
+that call and keep driving the agent.
 """
 
 from __future__ import annotations

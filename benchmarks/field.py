@@ -42,46 +42,47 @@ def phone(args) -> None:
     from bearcat.bus.messages import Fix, Guidance
     from bearcat.bus.zenoh_session import ZenohSession, config
 
-    session = ZenohSession(args.phone, config(connect=[args.connect], listen=[], mode=args.mode))
-    sent: dict[float, float] = {}
-    latencies: list[float] = []
-    echo_rtts: list[float] = []
-    lock = threading.Lock()
+    with ZenohSession(args.phone, config(connect=[args.connect], listen=[], mode=args.mode)) as session:
+        sent: dict[float, float] = {}
+        latencies: list[float] = []
+        echo_rtts: list[float] = []
+        lock = threading.Lock()
 
-    def on_guidance(key, payload, sender):
-        now = time.time()
-        message = decode(payload, key)
-        if isinstance(message, Guidance):
+        def on_guidance(key, payload, sender):
+            now = time.time()
+            message = decode(payload, key)
+            if isinstance(message, Guidance):
+                with lock:
+                    for r in message.reports:
+                        if r.agent == args.phone:
+                            # This fix, and any older one still waiting, is now reflected on the screen.
+                            for t in [t for t in sent if t <= r.t]:
+                                latencies.append(now - sent.pop(t))
+
+        def on_echo(key, payload, sender):
+            echo_rtts.append(time.time() - float(payload.decode()))
+
+        session.subscribe(keys.guidance(GAME, args.phone), on_guidance)
+        session.subscribe(f"bench/echo/{args.phone}/back", on_echo)
+        session.declare_token(keys.alive(GAME, "phone", args.phone))
+        time.sleep(args.warmup)
+        end = time.time() + args.duration
+        seq, due = 0, time.monotonic()
+        while time.time() < end:
+            seq += 1
+            t = time.time()
             with lock:
-                for r in message.reports:
-                    if r.agent == args.phone:
-                        # This fix, and any older one still waiting, is now reflected on the screen.
-                        for t in [t for t in sent if t <= r.t]:
-                            latencies.append(now - sent.pop(t))
-
-    def on_echo(key, payload, sender):
-        echo_rtts.append(time.time() - float(payload.decode()))
-
-    session.subscribe(keys.guidance(GAME, args.phone), on_guidance)
-    session.subscribe(f"bench/echo/{args.phone}/back", on_echo)
-    session.declare_token(keys.alive(GAME, "phone", args.phone))
-    time.sleep(args.warmup)
-    end = time.time() + args.duration
-    seq, due = 0, time.monotonic()
-    while time.time() < end:
-        seq += 1
-        t = time.time()
-        with lock:
-            sent[t] = t
-        lat, lon = 37.8719 + 1e-6 * (seq % 100), -122.2585
-        session.put(
-            keys.fix(GAME, args.phone), encode(Fix(agent=args.phone, seq=seq, t=t, lat=lat, lon=lon)), reliable=False
-        )
-        session.put(f"bench/echo/{args.phone}/out", str(time.time()).encode(), reliable=False)
-        due += 0.1
-        time.sleep(max(due - time.monotonic(), 0))
-    time.sleep(1.0)
-    session.close()
+                sent[t] = t
+            lat, lon = 37.8719 + 1e-6 * (seq % 100), -122.2585
+            session.put(
+                keys.fix(GAME, args.phone),
+                encode(Fix(agent=args.phone, seq=seq, t=t, lat=lat, lon=lon)),
+                reliable=False,
+            )
+            session.put(f"bench/echo/{args.phone}/out", str(time.time()).encode(), reliable=False)
+            due += 0.1
+            time.sleep(max(due - time.monotonic(), 0))
+        time.sleep(1.0)
     Path(args.out).write_text(
         json.dumps({"latencies": latencies, "sent": seq, "answered": len(latencies), "echo": echo_rtts})
     )
@@ -100,55 +101,56 @@ def latency(n: int, duration: float, mode: str = "peer") -> dict:
     endpoint = f"tcp/127.0.0.1:{port}"
     ids = [f"p{k}" for k in range(n)]
     hub = "router" if mode == "client" else "peer"
-    session = ZenohSession("gs", config(listen=[endpoint], mode=hub))
-    # The bare-Zenoh peer: echo every ping straight back.
-    echo = ZenohSession("echo", config(connect=[endpoint], listen=[] if mode == "client" else None, mode=mode))
-    echo.subscribe("bench/echo/*/out", lambda k, p, s: echo.put(k.rsplit("/", 1)[0] + "/back", p, reliable=False))
-    service = GuidanceService(GAME, load_map("field-50"), ids, rate=10.0)
-    received: dict[str, set] = {pid: set() for pid in ids}
+    # The bare-Zenoh peer, "echo", sends every ping straight back.
+    with (
+        ZenohSession("gs", config(listen=[endpoint], mode=hub)) as session,
+        ZenohSession("echo", config(connect=[endpoint], listen=[] if mode == "client" else None, mode=mode)) as echo,
+    ):
+        echo.subscribe("bench/echo/*/out", lambda k, p, s: echo.put(k.rsplit("/", 1)[0] + "/back", p, reliable=False))
+        service = GuidanceService(GAME, load_map("field-50"), ids, rate=10.0)
+        received: dict[str, set] = {pid: set() for pid in ids}
 
-    def count(key, payload, sender):
-        message = Inbox("count").accept(key, payload)
-        if message is not None:
-            received[message.agent].add(message.seq)
+        def count(key, payload, sender):
+            message = Inbox("count").accept(key, payload)
+            if message is not None:
+                received[message.agent].add(message.seq)
 
-    session.subscribe(keys.every(GAME, "fix"), count)
-    seen = set()
-    session.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, up: seen.add(k) if up else None)
-    with tempfile.TemporaryDirectory() as tmp:
-        procs = [
-            subprocess.Popen(
-                [
-                    sys.executable,
-                    __file__,
-                    "--phone",
-                    pid,
-                    "--connect",
-                    endpoint,
-                    "--duration",
-                    str(duration),
-                    "--warmup",
-                    "3",
-                    "--out",
-                    f"{tmp}/{pid}.json",
-                    "--mode",
-                    mode,
-                ]
-            )
-            for pid in ids
-        ]
+        session.subscribe(keys.every(GAME, "fix"), count)
+        seen = set()
+        session.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, up: seen.add(k) if up else None)
+        with tempfile.TemporaryDirectory() as tmp:
+            procs = [
+                subprocess.Popen(
+                    [
+                        sys.executable,
+                        __file__,
+                        "--phone",
+                        pid,
+                        "--connect",
+                        endpoint,
+                        "--duration",
+                        str(duration),
+                        "--warmup",
+                        "3",
+                        "--out",
+                        f"{tmp}/{pid}.json",
+                        "--mode",
+                        mode,
+                    ]
+                )
+                for pid in ids
+            ]
 
-        async def serve():
-            task = asyncio.create_task(run_peer([service], session, GAME))
-            await asyncio.sleep(duration + 12.0)
-            task.cancel()
-            await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
+            async def serve():
+                task = asyncio.create_task(run_peer([service], session, GAME))
+                await asyncio.sleep(duration + 12.0)
+                task.cancel()
+                await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
 
-        asyncio.run(serve())
-        for p in procs:
-            p.wait(timeout=60)
-        results = [json.loads(Path(f"{tmp}/{pid}.json").read_text()) for pid in ids]
-    echo.close()
+            asyncio.run(serve())
+            for p in procs:
+                p.wait(timeout=60)
+            results = [json.loads(Path(f"{tmp}/{pid}.json").read_text()) for pid in ids]
     lat = np.concatenate([r["latencies"] for r in results]) * 1e3
     rtt = np.concatenate([r["echo"] for r in results]) * 1e3
     sent = sum(r["sent"] for r in results)

@@ -15,12 +15,18 @@ Subscriber callbacks run on a Zenoh-owned thread: they must be short (the
 live runtime's hand the sample to its asyncio loop and return), and an
 exception in one is logged and counted in ``callback_errors``, never lost
 silently.
+
+A session is a context manager, as zenoh's own are (``with ZenohSession(...)
+as session:``), so whoever opens one closes it on every path out. Opening one
+that cannot reach its endpoints (a client whose router is not there) raises
+a ``BusError`` that names them.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import re
 import threading
 
 import zenoh
@@ -72,10 +78,20 @@ class ZenohSession:
         self.closed = False
         self.callback_errors = 0
         self._lock = threading.Lock()
-        self._session = zenoh.open(zconfig if zconfig is not None else config())
+        zconfig = zconfig if zconfig is not None else config()
+        try:
+            self._session = zenoh.open(zconfig)
+        except zenoh.ZError as exc:
+            raise BusError(_refusal(self.name, zconfig, exc)) from None
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
         self._declared: list = []  # subscribers and tokens, undeclared on close
         self._attachment = self.name.encode()
+
+    def __enter__(self) -> ZenohSession:
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        self.close()
 
     def put(self, key: str, payload: bytes, *, reliable: bool = True) -> None:
         self._check_open()
@@ -164,3 +180,17 @@ class ZenohSession:
     def _check_open(self) -> None:
         if self.closed:
             raise BusError(f"session {self.name!r} is closed")
+
+
+def _refusal(name: str, zconfig: zenoh.Config, exc: zenoh.ZError) -> str:
+    """Why zenoh would not open session ``name``, as one sentence naming the endpoints."""
+    text = re.sub(r"\s*at /\S+\.rs:\d+\.?", "", str(exc)).strip()
+    try:
+        connect = json.loads(zconfig.get_json("connect/endpoints"))
+    except (zenoh.ZError, ValueError):
+        connect = []
+    if text.startswith("Unable to connect") and connect:
+        return f"session {name!r} could not connect to {' or '.join(connect)}: nothing answered there"
+    if text.startswith("No peer specified"):
+        return f"session {name!r} is a client with no endpoint to connect to"
+    return f"zenoh could not open session {name!r}: {text}"

@@ -68,7 +68,7 @@ class Cast:
         return self.ground + list(self.people.values()) + list(self.uavs.values())
 
 
-def cast(
+def build_cast(
     scenario: Scenario,
     profile: Profile,
     seed: int,

@@ -15,8 +15,10 @@ Agents driven from a keyboard are not started here: the launcher prints the
 ``bearcat peer`` command for a person to run in a terminal, and waits.
 
 The launcher's own session records every message of the game it sees into
-``events.jsonl``; each peer writes what its network shim did to the messages
-it received into ``peers/NAME.jsonl`` and its log into ``peers/NAME.log``.
+``events.jsonl``; each peer writes what it sent and received, what its
+network shim did to the messages it received and its agents' failures into
+``peers/NAME.jsonl``, and its log into ``peers/NAME.log``. The outcome counts
+the failures of each agent from those logs.
 """
 
 from __future__ import annotations
@@ -28,15 +30,18 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
+from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.agents.ground_station.recorder import EventLog, read_events
 from bearcat.agents.ground_station.recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.scenarios.dispatch import FAILED
 from bearcat.scenarios.schema import Scenario
 
 log = logging.getLogger(__name__)
@@ -55,6 +60,7 @@ class LiveOutcome:
     elapsed: float
     ended: bool
     peers: dict[str, int | None] = field(default_factory=dict)  # exit codes
+    failures: dict[str, int] = field(default_factory=dict)  # agent -> exceptions it raised
     out: str = ""
 
 
@@ -120,105 +126,114 @@ def launch(
     # The launcher is the hub: a router every peer joins as a client. A mesh
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
-    session = ZenohSession("launcher", config(listen=[endpoint], mode="router"))
-    # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
-    (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
-    record = EventLog(out / "events.jsonl")
-    inbox = Inbox("launcher")
-    final: dict = {}
-    alive: set[str] = set()
-    lock = threading.Lock()
-    game = scenario.name
+    with (
+        ZenohSession("launcher", config(listen=[endpoint], mode="router")) as session,
+        closing(EventLog(out / "events.jsonl")) as record,
+    ):
+        # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
+        (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
+        inbox = Inbox("launcher")
+        final: dict = {}
+        alive: set[str] = set()
+        lock = threading.Lock()
+        game = scenario.name
 
-    def seen(key, payload, sender):
-        message = inbox.accept(key, payload)
-        with lock:
-            if message is None:
-                record.refused(time.time(), sender, "launcher", key, "undecodable or wrong for its key")
-                return
-            record.sent(time.time(), sender, key, message)
-            if isinstance(message, GameState) and message.phase == "ended" and "state" not in final:
-                final["state"] = message
-
-    def liveliness(key, up):
-        with lock:
-            (alive.add if up else alive.discard)(key)
-            record.note(time.time(), "alive" if up else "gone", key=key)
-
-    session.subscribe(keys.game_wide(game), seen)
-    session.subscribe_liveliness(keys.every(game, "alive"), liveliness)
-
-    keyboard = [a.id for a in scenario.agents if a.behaviour == "keyboard"]
-    expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
-    expected |= {keys.alive(game, "walker", a.id) for a in scenario.agents}
-    expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
-    if scenario.uavs:
-        expected.add(keys.alive(game, "ground-station", "uav-tasking"))
-    children: dict[str, subprocess.Popen] = {}
-    started_at = None
-    reason = None
-    try:
-
-        def spawn(name: str, command: list[str]) -> None:
-            # The child keeps its own copy of the log's descriptor; ours closes at once.
-            with open(out / "peers" / f"{name}.log", "w") as logfile:
-                children[name] = subprocess.Popen(
-                    command, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
-                )
-
-        roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
-        for role, name in roles:
-            spawn(name, peer_command(role, scenario_ref, name, endpoint, seed, netem, out))
-        for k, uav in enumerate(scenario.uavs):
-            port = free_port(socket.SOCK_DGRAM)
-            spawn(f"vehicle-{uav.id}", vehicle_command(scenario, k, port))
-            fly = ["--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"]
-            spawn(uav.id, peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out) + fly)
-        for name in keyboard:
-            say(
-                f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
-                + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out))
-            )
-        deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
-        while True:
+        def seen(key, payload, sender):
+            message = inbox.accept(key, payload)
             with lock:
-                missing = sorted(expected - alive)
-            if not missing:
-                break
-            dead = [n for n, p in children.items() if p.poll() is not None]
-            if dead:
-                reason = f"peer {dead[0]} exited with code {children[dead[0]].returncode} before the start"
-                break
-            if time.monotonic() > deadline:
-                reason = f"peers not up after {startup:g} s: {', '.join(k.rsplit('/', 1)[-1] for k in missing)}"
-                break
-            time.sleep(0.05)
-        if reason is None:
-            start = Control(t=time.time(), command="start")
-            session.put(keys.control(game), encode(start))
-            started_at = time.monotonic()
-            say(f"{game}: {len(expected)} peers up; game started")
-            reason = _supervise(children, final, lock, started_at, scenario.time_limit + GRACE)
-    except KeyboardInterrupt:
-        reason = "interrupted"
-    finally:
-        codes = _stop_all(session, game, children, final, lock, reason)
-        state = final.get("state")
-        outcome = LiveOutcome(
-            scenario=game,
-            winner=state.winner if state else None,
-            reason=state.reason if state else (reason or "stopped"),
-            elapsed=state.elapsed if state else (0.0 if started_at is None else time.monotonic() - started_at),
-            ended=state is not None,
-            peers=codes,
-            out=str(out),
-        )
-        record.note(time.time(), "outcome", **vars(outcome))
-        record.close()
-        session.close()
-        (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
-        finish_run(out, scenario.map, game)
+                if message is None:
+                    record.refused(time.time(), sender, "launcher", key, "undecodable or wrong for its key")
+                    return
+                record.sent(time.time(), sender, key, message)
+                if isinstance(message, GameState) and message.phase == "ended" and "state" not in final:
+                    final["state"] = message
+
+        def liveliness(key, up):
+            with lock:
+                (alive.add if up else alive.discard)(key)
+                record.note(time.time(), "alive" if up else "gone", key=key)
+
+        session.subscribe(keys.game_wide(game), seen)
+        session.subscribe_liveliness(keys.every(game, "alive"), liveliness)
+
+        keyboard = [a.id for a in scenario.agents if a.behaviour == "keyboard"]
+        expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
+        expected |= {keys.alive(game, "walker", a.id) for a in scenario.agents}
+        expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
+        if scenario.uavs:
+            expected.add(keys.alive(game, "ground-station", "uav-tasking"))
+        children: dict[str, subprocess.Popen] = {}
+        started_at = None
+        reason = None
+        try:
+
+            def spawn(name: str, command: list[str]) -> None:
+                # The child keeps its own copy of the log's descriptor; ours closes at once.
+                with open(out / "peers" / f"{name}.log", "w") as logfile:
+                    children[name] = subprocess.Popen(
+                        command, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
+                    )
+
+            roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
+            for role, name in roles:
+                spawn(name, peer_command(role, scenario_ref, name, endpoint, seed, netem, out))
+            for k, uav in enumerate(scenario.uavs):
+                port = free_port(socket.SOCK_DGRAM)
+                spawn(f"vehicle-{uav.id}", vehicle_command(scenario, k, port))
+                fly = ["--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"]
+                spawn(uav.id, peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out) + fly)
+            for name in keyboard:
+                say(
+                    f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
+                    + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out))
+                )
+            deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
+            while True:
+                with lock:
+                    missing = sorted(expected - alive)
+                if not missing:
+                    break
+                dead = [n for n, p in children.items() if p.poll() is not None]
+                if dead:
+                    reason = f"peer {dead[0]} exited with code {children[dead[0]].returncode} before the start"
+                    break
+                if time.monotonic() > deadline:
+                    reason = f"peers not up after {startup:g} s: {', '.join(k.rsplit('/', 1)[-1] for k in missing)}"
+                    break
+                time.sleep(0.05)
+            if reason is None:
+                start = Control(t=time.time(), command="start")
+                session.put(keys.control(game), encode(start))
+                started_at = time.monotonic()
+                say(f"{game}: {len(expected)} peers up; game started")
+                reason = _supervise(children, final, lock, started_at, scenario.time_limit + GRACE)
+        except KeyboardInterrupt:
+            reason = "interrupted"
+        finally:
+            codes = _stop_all(session, game, children, final, lock, reason)
+            state = final.get("state")
+            outcome = LiveOutcome(
+                scenario=game,
+                winner=state.winner if state else None,
+                reason=state.reason if state else (reason or "stopped"),
+                elapsed=state.elapsed if state else (0.0 if started_at is None else time.monotonic() - started_at),
+                ended=state is not None,
+                peers=codes,
+                failures=agent_failures(out / "peers"),
+                out=str(out),
+            )
+            record.note(time.time(), "outcome", **vars(outcome))
+            (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
+    finish_run(out, scenario.map, game)
     return outcome
+
+
+def agent_failures(peers: Path) -> dict[str, int]:
+    """How often each agent raised, from the ``failed`` events of the peers' logs in ``peers``."""
+    counts: Counter[str] = Counter()
+    for path in sorted(peers.glob("*.jsonl")):
+        counts.update(e["agent"] for e in read_events(path) if e["event"] == FAILED)
+    return dict(sorted(counts.items()))
 
 
 def _supervise(children, final, lock, started_at: float, limit: float) -> str | None:

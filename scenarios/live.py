@@ -16,13 +16,15 @@ from __future__ import annotations
 import asyncio
 import logging
 import signal
+from contextlib import closing
 
 from bearcat.agents.ground_station.recorder import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
-from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.codec import Inbox
 from bearcat.bus.messages import Control, GameState
 from bearcat.netem.shim import Shim
+from bearcat.scenarios.dispatch import Dispatcher
 
 log = logging.getLogger(__name__)
 
@@ -31,29 +33,21 @@ POLL = 0.1
 
 
 async def run_peer(agents, session, game: str, *, shim: Shim | None = None, record: EventLog | None = None) -> str:
-    """Drive ``agents`` on ``session`` until the game ends; why it stopped."""
+    """Drive ``agents`` on ``session`` until the game ends; why it stopped,
+    and how often each agent failed if any did. The session is closed on the
+    way out, while the loop still stands, so no late sample is handed to it."""
     loop = asyncio.get_running_loop()
     clock = WallClock()
     record = record or EventLog(None)
+    dispatch = Dispatcher(record, clock.now)
     finished = asyncio.Event()
     why = {"reason": "stopped"}
 
-    def publish(sends) -> None:
-        for s in sends:
-            record.sent(clock.now(), session.name, s.key, s.message)
-            session.put(s.key, encode(s.message), reliable=keys.reliable(s.key))
-
-    def handler(agent, inbox):
+    def handler(agent):
         def handle(key, payload, sender):
-            message = inbox.accept(key, payload)
-            if message is None:
-                record.refused(clock.now(), sender, agent.name, key, "undecodable or wrong for its key")
+            if session.closed:  # held by the shim past the end of the peer
                 return
-            record.received(clock.now(), sender, agent.name, key, getattr(message, "seq", None))
-            try:
-                publish(agent.handle(key, message, clock.now()))
-            except Exception:
-                log.exception("%s failed on a message on %s", agent.name, key)
+            message = dispatch.receive(agent, key, payload, sender)
             if isinstance(message, GameState) and message.phase == "ended" and not finished.is_set():
                 why["reason"] = f"game ended: {message.reason}"
                 loop.call_later(LINGER, finished.set)
@@ -81,27 +75,23 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
 
     handles = {}
     for agent in agents:
-        handle, arrived = handler(agent, Inbox(agent.name))
+        dispatch.attach(agent, session)
+        handle, arrived = handler(agent)
         handles[agent.name] = handle
         for expr in agent.subscriptions:
             session.subscribe(expr, lambda k, p, s, arrived=arrived: soon(arrived, k, p, s))
         for expr in agent.watches:
-            session.subscribe_liveliness(
-                expr, lambda k, alive, a=agent: soon(lambda: publish(a.peer(k, alive, clock.now())))
-            )
+            session.subscribe_liveliness(expr, lambda k, alive, a=agent: soon(dispatch.peer, a, k, alive))
     for agent in agents:
         session.declare_token(keys.alive(game, agent.role, agent.name))
 
     async def ticker(agent):
-        publish(agent.start(clock.now()))
+        dispatch.start(agent)
         due = loop.time()
         while True:
             due += agent.period
             await asyncio.sleep(max(due - loop.time(), 0.0))
-            try:
-                publish(agent.tick(clock.now()))
-            except Exception:
-                log.exception("%s failed on a tick", agent.name)
+            dispatch.tick(agent)
 
     async def poller():
         while True:
@@ -126,6 +116,9 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
         await asyncio.gather(*tasks, return_exceptions=True)
         session.close()
         record.close()
+    if dispatch.failures:
+        counts = ", ".join(f"{name} {n}" for name, n in sorted(dispatch.failures.items()))
+        return f"{why['reason']}; agent failures: {counts}"
     return why["reason"]
 
 
@@ -153,13 +146,13 @@ def start_peer(
     from bearcat.bus.errors import BusError
     from bearcat.bus.zenoh_session import ZenohSession, config
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import cast
+    from bearcat.scenarios.cast import build_cast
     from bearcat.scenarios.schema import ScenarioError
 
     profile = load_profile(netem)
     autopilot = None
     if role == "ground-station":
-        players = cast(scenario, profile, seed, people=[], ground=True, judge=judge)
+        players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge)
         agents, name = players.ground, players.guidance.name
     elif role == "uav":
         from bearcat.agents.uav.autopilot import MavsdkAutopilot
@@ -172,7 +165,7 @@ def start_peer(
         if not vehicle:
             raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
         autopilot = MavsdkAutopilot(vehicle, sysid=sysid)
-        players = cast(
+        players = build_cast(
             scenario,
             profile,
             seed,
@@ -188,54 +181,54 @@ def start_peer(
             raise ScenarioError(
                 f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
             )
-        players = cast(scenario, profile, seed, people=[agent], ground=False)
+        players = build_cast(scenario, profile, seed, people=[agent], ground=False)
         agents, name = [players.people[agent]], agent
     else:
         raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker or uav")
-    record = EventLog(None if out is None else f"{out}/peers/{name}.jsonl")
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
     if mode == "client" and listen is None:
         listen = []  # a client does not listen
-    session = ZenohSession(name, config(listen=listen, connect=connect, mode=mode))
-    if role == "ground-station":
-        # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.
-        from bearcat.maps.geojson import dumps
+    with (
+        closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl")) as record,
+        ZenohSession(name, config(listen=listen, connect=connect, mode=mode)) as session,
+    ):
+        if role == "ground-station":
+            # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.
+            from bearcat.maps.geojson import dumps
 
-        geojson = dumps(scenario.map, units="metres").encode()
-        session.serve(keys.map_query(scenario.name), lambda: geojson)
-        session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
-    if zones is not None:
-        # Dead zones need every peer's position: in simulation the truth tells it.
-        def on_truth(key, payload, sender):
-            message = Inbox(name).accept(key, payload)
-            if message is not None:
-                positions[message.agent] = scenario.map.to_local(message.lat, message.lon)
+            geojson = dumps(scenario.map, units="metres").encode()
+            session.serve(keys.map_query(scenario.name), lambda: geojson)
+            session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
+        if zones is not None:
+            # Dead zones need every peer's position: in simulation the truth tells it.
+            def on_truth(key, payload, sender):
+                message = Inbox(name).accept(key, payload)
+                if message is not None:
+                    positions[message.agent] = scenario.map.to_local(message.lat, message.lon)
 
-        session.subscribe(keys.every(scenario.name, "truth"), on_truth)
-    shim = Shim(
-        profile.link,
-        seed,
-        dead_zones=zones,
-        where=positions.get if zones is not None else None,
-        record=record.impaired,
-        colocated=(GROUND_PEERS),
-    )
-    keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
-    if keyboard:
-        _read_keys(keyboard[0].behaviour)
-    if autopilot is None:
-        return asyncio.run(run_peer(agents, session, scenario.name, shim=shim, record=record))
-    return asyncio.run(_fly(autopilot, run_peer(agents, session, scenario.name, shim=shim, record=record), session))
+            session.subscribe(keys.every(scenario.name, "truth"), on_truth)
+        shim = Shim(
+            profile.link,
+            seed,
+            dead_zones=zones,
+            where=positions.get if zones is not None else None,
+            record=record.impaired,
+            colocated=GROUND_PEERS,
+        )
+        keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
+        if keyboard:
+            _read_keys(keyboard[0].behaviour)
+        peer = run_peer(agents, session, scenario.name, shim=shim, record=record)
+        return asyncio.run(peer if autopilot is None else _fly(autopilot, peer))
 
 
-async def _fly(autopilot, peer, session) -> str:
+async def _fly(autopilot, peer) -> str:
     """Connect to the vehicle, then play; let go of it in every case."""
     try:
         await autopilot.connect()
-    except TimeoutError:
-        peer.close()
-        session.close()
+    except BaseException:
+        peer.close()  # the peer never started
         raise
     try:
         return await peer
@@ -255,15 +248,12 @@ def fetch_scenario(game: str, connect, timeout: float = 10.0):
     from bearcat.maps.geojson import parse_geojson
     from bearcat.scenarios.schema import parse_scenario
 
-    session = ZenohSession(f"fetch-{int(time.time() * 1000) % 10**9}", config(connect=connect))
-    try:
+    with ZenohSession(f"fetch-{int(time.time() * 1000) % 10**9}", config(connect=connect)) as session:
         end = time.monotonic() + timeout
         text = geojson = None
         while time.monotonic() < end and (text is None or geojson is None):
             text = text or session.fetch(keys.scenario_query(game), timeout=1.0)
             geojson = geojson or session.fetch(keys.map_query(game), timeout=1.0)
-    finally:
-        session.close()
     if text is None or geojson is None:
         raise BusError(
             f"no ground station of game {game!r} answered at {', '.join(connect) or 'the default endpoints'}"

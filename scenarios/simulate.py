@@ -4,8 +4,9 @@ A simpy environment drives the agents (each ticks at its own period from
 t = 0) over the in-process bus. Every message is encoded by its sender and
 decoded by each receiver, as on Zenoh, and crosses the netem shim of its
 directed link, which decides when (and whether, and how often) it arrives;
-arrivals are scheduled in virtual time. The launcher's part is played here
-too: liveliness tokens for every peer, the start command at t = 0, and the
+arrivals are scheduled in virtual time. The agents are driven as in live
+runs (scenarios/dispatch.py: an agent's exception is recorded and the game
+goes on). The launcher's part is played here too: liveliness tokens for every peer, the start command at t = 0, and the
 end when the referee says the game is over. For a seed the run is
 deterministic, down to every line of its event log.
 """
@@ -26,7 +27,8 @@ from bearcat.bus.inprocess import InProcessBus
 from bearcat.bus.messages import Control, GameState
 from bearcat.netem.profiles import load_profile
 from bearcat.netem.shim import Shim
-from bearcat.scenarios.cast import cast
+from bearcat.scenarios.cast import Cast, build_cast
+from bearcat.scenarios.dispatch import Dispatcher
 from bearcat.scenarios.schema import Scenario
 
 log = logging.getLogger(__name__)
@@ -52,6 +54,7 @@ class Outcome:
     captured: list[str] = field(default_factory=list)
     counts: dict[str, int] = field(default_factory=dict)
     drops: dict[str, dict[str, int]] = field(default_factory=dict)
+    failures: dict[str, int] = field(default_factory=dict)
     notes: dict = field(default_factory=dict)
 
 
@@ -63,13 +66,18 @@ def simulate(
     events: str | Path | None = None,
     ctf_progress=None,
     inspect=None,
+    players: Cast | None = None,
 ) -> Outcome:
     """Play ``scenario`` once; ``events`` is the path of the event log to
     write. ``inspect(now, players)``, if given, looks at every agent's state
-    ten times a second (tests check invariants against the truth with it)."""
+    ten times a second (tests check invariants against the truth with it).
+    ``players`` plays instead of the cast ``build_cast`` makes for the seed
+    and network profile (built for the same ones, with an agent swapped or
+    wrapped)."""
     seed = scenario.seed if seed is None else int(seed)
     profile = load_profile(netem or scenario.netem)
-    players = cast(scenario, profile, seed, ctf_progress=ctf_progress)
+    if players is None:
+        players = build_cast(scenario, profile, seed, ctf_progress=ctf_progress)
     env = simpy.Environment()
     record = EventLog(events)
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
@@ -99,39 +107,25 @@ def simulate(
             env.timeout(max(d.at - env.now, 0.0)).callbacks.append(arrive(call, d.payload))
 
     bus = InProcessBus(deliver)
-    inboxes = {}
+    dispatch = Dispatcher(record, lambda: env.now)
     final: dict = {}
 
-    def send(session, sends):
-        for s in sends:
-            record.sent(env.now, session.name, s.key, s.message)
-            session.put(s.key, encode(s.message), reliable=keys.reliable(s.key))
+    def receiver(agent):
+        return lambda key, payload, sender: dispatch.receive(agent, key, payload, sender)
 
-    def receiver(agent, session, inbox):
-        def on(key, payload, sender):
-            message = inbox.accept(key, payload)
-            if message is None:
-                record.refused(env.now, sender, agent.name, key, "undecodable or wrong for its key")
-                return
-            record.received(env.now, sender, agent.name, key, getattr(message, "seq", None))
-            send(session, agent.handle(key, message, env.now))
+    def watcher(agent):
+        return lambda key, alive: dispatch.peer(agent, key, alive)
 
-        return on
-
-    def watcher(agent, session):
-        return lambda key, alive: send(session, agent.peer(key, alive, env.now))
-
-    sessions = []
+    sessions = {}
     for agent in players.agents:
-        session = bus.session(agent.name)
-        inbox = inboxes[agent.name] = Inbox(agent.name)
+        session = sessions[agent.name] = bus.session(agent.name)
+        dispatch.attach(agent, session)
         for expr in agent.subscriptions:
-            session.subscribe(expr, receiver(agent, session, inbox))
+            session.subscribe(expr, receiver(agent))
         for expr in agent.watches:
-            session.subscribe_liveliness(expr, watcher(agent, session))
-        sessions.append((agent, session))
-    for agent, session in sessions:
-        session.declare_token(keys.alive(scenario.name, agent.role, agent.name))
+            session.subscribe_liveliness(expr, watcher(agent))
+    for agent in players.agents:
+        sessions[agent.name].declare_token(keys.alive(scenario.name, agent.role, agent.name))
 
     launcher = bus.session(LAUNCHER)
     launcher_inbox = Inbox(LAUNCHER)
@@ -145,11 +139,11 @@ def simulate(
 
     launcher.subscribe(keys.state(scenario.name), on_state)
 
-    def ticker(agent, session):
-        send(session, agent.start(env.now))
+    def ticker(agent):
+        dispatch.start(agent)
         while True:
             yield env.timeout(agent.period)
-            send(session, agent.tick(env.now))
+            dispatch.tick(agent)
 
     def poller():
         while True:
@@ -162,8 +156,8 @@ def simulate(
             yield env.timeout(POLL)
             inspect(env.now, players)
 
-    for agent, session in sessions:
-        env.process(ticker(agent, session))
+    for agent in players.agents:
+        env.process(ticker(agent))
     if inspect is not None:
         env.process(inspector())
     if zones is not None:
@@ -185,12 +179,13 @@ def simulate(
         flag_holder=state.flag_holder if state else None,
         captured=list(state.captured) if state else [],
         counts=dict(sorted(record.counts.items())),
-        drops={name: dict(inbox.drops) for name, inbox in inboxes.items() if inbox.dropped},
+        drops=dispatch.drops,
+        failures=dict(sorted(dispatch.failures.items())),
         notes=_notes(players),
     )
     record.note(env.now, "outcome", **{k: v for k, v in vars(outcome).items() if k != "counts"})
     record.close()
-    for _, session in sessions:
+    for session in sessions.values():
         session.close()
     return outcome
 

@@ -229,11 +229,11 @@ def _wait(predicate, timeout=3.0):
 @pytest.fixture
 def zenoh_pair():
     port = _free_port()
-    hub = ZenohSession("hub", config(listen=[f"tcp/127.0.0.1:{port}"]))
-    leaf = ZenohSession("leaf", config(connect=[f"tcp/127.0.0.1:{port}"]))
-    yield hub, leaf
-    leaf.close()
-    hub.close()
+    with (
+        ZenohSession("hub", config(listen=[f"tcp/127.0.0.1:{port}"])) as hub,
+        ZenohSession("leaf", config(connect=[f"tcp/127.0.0.1:{port}"])) as leaf,
+    ):
+        yield hub, leaf
 
 
 def test_zenoh_delivers_fixes_and_state_with_the_sender_and_drops_garbage(zenoh_pair):
@@ -278,6 +278,21 @@ def test_a_raising_zenoh_callback_is_counted_not_lost(zenoh_pair):
     time.sleep(0.2)  # the subscription's declaration reaches the leaf
     leaf.put(keys.state(GAME), b"x")
     assert _wait(lambda: hub.callback_errors == 1)
+
+
+def test_a_zenoh_session_closes_when_its_block_ends_even_by_an_exception():
+    endpoint = f"tcp/127.0.0.1:{_free_port()}"
+    with ZenohSession("hub", config(listen=[endpoint])) as hub:
+        seen = []
+        hub.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, alive: seen.append(alive))
+        with pytest.raises(KeyError), ZenohSession("brief", config(connect=[endpoint])) as brief:
+            brief.declare_token(keys.alive(GAME, "walker", "w2"))
+            assert _wait(lambda: seen == [True])
+            raise KeyError("out of the block")
+        assert brief.closed and _wait(lambda: seen == [True, False])
+    assert hub.closed
+    with pytest.raises(BusError, match="'brief' is closed"):
+        brief.put(keys.state(GAME), b"")
 
 
 def test_a_bad_endpoint_is_named():

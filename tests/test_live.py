@@ -2,23 +2,35 @@
 A game finishes and leaves no process behind; a walker killed mid-game is
 seen gone within two seconds and ends the game with that reason; garbage
 published on every key of the game is dropped and counted while the game
-goes on; Ctrl-C stops everything; a person at a terminal steers a keyboard
-walker."""
+goes on; an agent's exceptions are recorded and counted while its peer goes
+on; Ctrl-C stops everything; a person at a terminal steers a keyboard
+walker; a client whose router is not there says so in one sentence."""
 
+import asyncio
 import json
 import os
 import random
 import signal
 import subprocess
 import sys
+import threading
 import time
+from contextlib import closing
 from pathlib import Path
 
 import pytest
 
-from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.recorder import EventLog, read_events
 from bearcat.bus import keys
+from bearcat.bus.codec import decode, encode
+from bearcat.bus.messages import Fix, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.netem.profiles import load_profile
+from bearcat.scenarios.cast import build_cast
+from bearcat.scenarios.launch import agent_failures, free_port
+from bearcat.scenarios.live import run_peer
+from bearcat.scenarios.schema import load_scenario
+from tests.support.faulty import Faulty
 from tests.support.scenario_files import write_scenario
 
 
@@ -111,24 +123,23 @@ def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_pa
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         port = json.loads((out / "endpoint.json").read_text())["endpoint"]
-        vandal = ZenohSession("vandal", config(connect=[port]))
-        rng = random.Random(0)
-        game = "test-game"
-        targets = [
-            keys.fix(game, "attacker"),
-            keys.fix(game, "defender"),
-            keys.guidance(game, "attacker"),
-            keys.guidance(game, "defender"),
-            keys.state(game),
-            keys.control(game),
-            keys.truth(game, "attacker"),
-            keys.uav_task(game, "q1"),
-        ]
-        time.sleep(0.5)
-        for k in range(400):
-            payload = bytes(rng.randrange(256) for _ in range(rng.randrange(0, 64)))
-            vandal.put(targets[k % len(targets)], payload, reliable=k % 2 == 0)
-        vandal.close()
+        with ZenohSession("vandal", config(connect=[port])) as vandal:
+            rng = random.Random(0)
+            game = "test-game"
+            targets = [
+                keys.fix(game, "attacker"),
+                keys.fix(game, "defender"),
+                keys.guidance(game, "attacker"),
+                keys.guidance(game, "defender"),
+                keys.state(game),
+                keys.control(game),
+                keys.truth(game, "attacker"),
+                keys.uav_task(game, "q1"),
+            ]
+            time.sleep(0.5)
+            for k in range(400):
+                payload = bytes(rng.randrange(256) for _ in range(rng.randrange(0, 64)))
+                vandal.put(targets[k % len(targets)], payload, reliable=k % 2 == 0)
         output, _ = launcher.communicate(timeout=120)
     finally:
         if launcher.poll() is None:
@@ -139,6 +150,66 @@ def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_pa
     for name in ("gs", "attacker", "defender"):
         refused += sum(1 for e in read_events(out / "peers" / f"{name}.jsonl") if e["event"] == "refused")
     assert refused > 100
+
+
+def test_a_peer_whose_agent_raises_records_and_counts_it_and_goes_on(tmp_path):
+    """The live runtime in this process on real Zenoh sessions: the ground
+    station's guidance service raises on every third fix of the attacker and
+    on every fifth tick; it keeps answering, every exception is in the peer's
+    event log, and the peer's reason and the launcher's count report them."""
+    scenario = load_scenario(write_scenario(tmp_path, netem="ideal"))
+    game = scenario.name
+    players = build_cast(scenario, load_profile("ideal"), 0, people=[], ground=True)
+    fix = keys.fix(game, "attacker")
+    faulty = Faulty(players.guidance, fails_on=lambda key, message: key == fix and message.seq % 3 == 0, every=5)
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    answers = []
+
+    def play(player):
+        """Both players report for three seconds, then the game ends."""
+        assert wait_for(lambda: player.alive(keys.every(game, "alive")), 30), "the peer never came up"
+        time.sleep(0.5)  # its subscriptions reach this session
+        for seq in range(1, 31):
+            for agent, (x, y) in (("attacker", (25.0, 22.0 + 0.1 * seq)), ("defender", (25.0, 34.0))):
+                lat, lon = scenario.map.to_geodetic(x, y)
+                message = Fix(agent=agent, seq=seq, t=time.time(), lat=lat, lon=lon)
+                player.put(keys.fix(game, agent), encode(message), reliable=False)
+            time.sleep(0.1)
+        player.put(keys.state(game), encode(GameState(seq=1, t=time.time(), phase="ended", reason="enough")))
+
+    with (
+        ZenohSession("gs", config(listen=[endpoint])) as session,
+        ZenohSession("player", config(connect=[endpoint])) as player,
+        closing(EventLog(tmp_path / "run" / "peers" / "gs.jsonl")) as record,
+    ):
+        player.subscribe(keys.guidance(game, "attacker"), lambda k, p, s: answers.append(decode(p, k)))
+        players_thread = threading.Thread(target=play, args=(player,))
+        players_thread.start()
+        reason = asyncio.run(run_peer([faulty], session, game, record=record))
+        players_thread.join()
+    failed = [e for e in read_events(tmp_path / "run" / "peers" / "gs.jsonl") if e["event"] == "failed"]
+    assert faulty.raised > 0 and len(failed) == faulty.raised
+    assert {e["key"] for e in failed} == {fix, "tick"} and all(e["agent"] == "gs" for e in failed)
+    assert {e["exception"] for e in failed} == {"RuntimeError", "ZeroDivisionError"}
+    assert sum(1 for m in answers if m.t > failed[0]["t"]) > 10
+    assert reason == f"game ended: enough; agent failures: gs {faulty.raised}"
+    assert agent_failures(tmp_path / "run" / "peers") == {"gs": faulty.raised}
+
+
+def test_a_client_whose_router_is_not_there_says_so_in_one_sentence(tmp_path, env):
+    endpoint = f"tcp/127.0.0.1:{free_port()}"  # nothing listens there
+    command = ["peer", "walker", "--scenario", str(write_scenario(tmp_path)), "--id", "attacker"]
+    done = subprocess.run(
+        [sys.executable, "-m", "bearcat", *command, "--mode", "client", "--connect", endpoint],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.splitlines() == [
+        f"bearcat: error: session 'attacker' could not connect to {endpoint}: nothing answered there"
+    ]
 
 
 def test_ctrl_c_stops_every_peer(tmp_path, env):

@@ -1,7 +1,7 @@
 """The simulation runtime end to end: a finished game with a winner the rules
 allow, the same seed giving the same event log line for line, the network
-profile showing in what the log records, and the referee's rules on their
-own."""
+profile showing in what the log records, an agent's exceptions recorded and
+counted while the game goes on, and the referee's rules on their own."""
 
 import itertools
 import json
@@ -15,8 +15,11 @@ from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.bus import keys
 from bearcat.bus.messages import Control, Truth
 from bearcat.maps import load_map
+from bearcat.netem.profiles import load_profile
+from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import load_scenario
 from bearcat.scenarios.simulate import simulate
+from tests.support.faulty import Faulty
 from tests.support.scenario_files import write_scenario
 
 
@@ -39,6 +42,7 @@ def test_a_game_finishes_with_a_winner_and_a_reason_the_rules_give(tmp_path):
     states = [e["message"] for e in events if e["event"] == "sent" and e["message"]["type"] == "state"]
     assert next(s["phase"] for s in states) == "waiting" and states[-1]["phase"] == "ended"
     assert states[-1]["elapsed"] == pytest.approx(outcome.elapsed)
+    assert outcome.failures == {} and not [e for e in events if e["event"] == "failed"]
 
 
 def test_the_same_seed_gives_the_same_event_log_and_another_seed_does_not(tmp_path):
@@ -48,6 +52,39 @@ def test_the_same_seed_gives_the_same_event_log_and_another_seed_does_not(tmp_pa
     a, b, c = ((tmp_path / n / "events.jsonl").read_bytes() for n in "abc")
     assert a == b
     assert a != c
+
+
+def play_with_a_faulty_ground_station(tmp_path, name, seed=2):
+    """A game whose guidance service raises on every fourth fix of the
+    attacker and on every seventh tick."""
+    scenario = load_scenario(write_scenario(tmp_path))
+    players = build_cast(scenario, load_profile(scenario.netem), seed)
+    fix = keys.fix(scenario.name, "attacker")
+    faulty = Faulty(players.guidance, fails_on=lambda key, message: key == fix and message.seq % 4 == 0, every=7)
+    players.guidance = faulty
+    events = tmp_path / name / "events.jsonl"
+    return simulate(scenario, seed=seed, events=events, players=players), faulty, read_events(events)
+
+
+def test_an_agent_that_raises_is_recorded_and_counted_and_the_game_goes_on(tmp_path):
+    outcome, faulty, events = play_with_a_faulty_ground_station(tmp_path, "a")
+    assert outcome.ended and outcome.winner in ("attacker", "defender") and events[-1]["event"] == "outcome"
+    failed = [e for e in events if e["event"] == "failed"]
+    assert faulty.raised > 0 and len(failed) == faulty.raised
+    assert outcome.failures == {"gs": faulty.raised} == events[-1]["failures"]
+    assert outcome.counts["failed"] == faulty.raised
+    on_fixes = [e for e in failed if e["key"] != "tick"]
+    on_ticks = [e for e in failed if e["key"] == "tick"]
+    assert on_fixes and on_ticks and all(e["agent"] == "gs" for e in failed)
+    assert all(e["key"] == keys.fix("test-game", "attacker") and e["exception"] == "RuntimeError" for e in on_fixes)
+    assert all("no answer to Fix seq" in e["reason"] for e in on_fixes)
+    assert all(e["exception"] == "ZeroDivisionError" and "divided by zero" in e["reason"] for e in on_ticks)
+    # The service goes on answering after its first failure, on ticks and on fixes.
+    guidance = [e for e in events if e["event"] == "sent" and "/guidance/" in e["key"]]
+    assert sum(1 for e in guidance if e["t"] > failed[0]["t"]) > 10
+    # Failures are as deterministic as the rest of the run.
+    play_with_a_faulty_ground_station(tmp_path, "b")
+    assert (tmp_path / "a" / "events.jsonl").read_bytes() == (tmp_path / "b" / "events.jsonl").read_bytes()
 
 
 def test_guidance_comes_from_fixes_the_network_delivered(tmp_path):

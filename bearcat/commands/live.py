@@ -102,7 +102,7 @@ def register(subparsers) -> None:
 
 def run_live(args) -> int:
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import cast
+    from bearcat.scenarios.cast import build_cast
     from bearcat.scenarios.launch import launch
 
     scenario = load_scenario(args.scenario)
@@ -112,7 +112,7 @@ def run_live(args) -> int:
     out = args.out or Path("runs") / f"{scenario.name}-{seed}"
     # Solve (or load) what the ground station needs here, with progress, so no peer waits on it.
     progress = solve_bars()
-    cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=progress)
+    build_cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=progress)
     progress.close()
     outcome = launch(
         scenario, _reference(args.scenario), out, seed=seed, netem=netem, say=lambda text: print(text, flush=True)

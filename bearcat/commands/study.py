@@ -34,7 +34,7 @@ def run(args) -> int:
 
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.batch import run_batch
-    from bearcat.scenarios.cast import cast
+    from bearcat.scenarios.cast import build_cast
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.studies import play_task, study_tasks, summarise, summarise_search
 
@@ -48,7 +48,7 @@ def run(args) -> int:
     # Solve each scenario's game once here, so the workers only load it.
     for name in STUDIES[args.study]["scenarios"]:
         scenario = load_scenario(name)
-        cast(scenario, load_profile(scenario.netem), 0, people=[], ground=True)
+        build_cast(scenario, load_profile(scenario.netem), 0, people=[], ground=True)
     tasks = study_tasks(args.study, args.trials, args.seed, args.netem)
     with tqdm(total=len(tasks), desc=args.study, unit="game", file=sys.stderr) as bar:
         results = run_batch(

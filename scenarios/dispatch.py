@@ -1,0 +1,91 @@
+"""How a runtime drives its agents, the same in simulation and live.
+
+What arrives for an agent is decoded through its inbox (a payload it refuses
+is recorded as ``refused``), recorded as ``received`` and handed to the agent;
+what the agent answers is recorded as ``sent`` and put on its session. The
+runtimes differ only in their clock and transport, not in this sequence.
+
+An agent that raises, in ``start``, ``handle``, ``tick`` or ``peer``, has a
+bug of its own; the peer it runs in goes on. The exception is counted per
+agent, recorded as a ``failed`` event (the agent, the key it was handling or
+``start``, ``tick``, and the exception's type and text) and logged with its
+traceback the first time and every hundredth after, so a tick that always
+fails cannot flood the log. Nothing is sent for the call that failed.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections import Counter
+from collections.abc import Callable
+
+from bearcat.agents.protocol import Agent, Send
+from bearcat.bus import keys
+from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.messages import Message
+
+log = logging.getLogger(__name__)
+
+FAILED = "failed"  # the event kind of an agent's exception in the event log
+
+
+class Dispatcher:
+    """Drives agents, each on the session it was attached with, recording
+    into ``record`` (an ``EventLog``) at the times ``now()`` gives."""
+
+    def __init__(self, record, now: Callable[[], float]) -> None:
+        self.record = record
+        self.now = now
+        self.failures: Counter[str] = Counter()  # agent -> exceptions raised
+        self._sessions: dict[str, object] = {}
+        self._inboxes: dict[str, Inbox] = {}
+
+    def attach(self, agent: Agent, session) -> None:
+        """Drive ``agent`` on ``session`` (peers that run several agents share one)."""
+        self._sessions[agent.name] = session
+        self._inboxes[agent.name] = Inbox(agent.name)
+
+    @property
+    def drops(self) -> dict[str, dict[str, int]]:
+        """Per agent that had to drop anything, its drops by reason."""
+        return {name: dict(inbox.drops) for name, inbox in self._inboxes.items() if inbox.dropped}
+
+    def start(self, agent: Agent) -> None:
+        self._publish(agent, self._call(agent, "start", agent.start, self.now()))
+
+    def tick(self, agent: Agent) -> None:
+        self._publish(agent, self._call(agent, "tick", agent.tick, self.now()))
+
+    def peer(self, agent: Agent, key: str, alive: bool) -> None:
+        self._publish(agent, self._call(agent, key, agent.peer, key, alive, self.now()))
+
+    def receive(self, agent: Agent, key: str, payload: bytes, sender: str) -> Message | None:
+        """Hand what arrived on ``key`` to ``agent``; the decoded message, None if refused."""
+        now = self.now()
+        message = self._inboxes[agent.name].accept(key, payload)
+        if message is None:
+            self.record.refused(now, sender, agent.name, key, "undecodable or wrong for its key")
+            return None
+        self.record.received(now, sender, agent.name, key, getattr(message, "seq", None))
+        self._publish(agent, self._call(agent, key, agent.handle, key, message, now))
+        return message
+
+    def _call(self, agent: Agent, where: str, method, *args) -> list[Send]:
+        try:
+            return method(*args)
+        except Exception as exc:
+            self.failures[agent.name] += 1
+            n = self.failures[agent.name]
+            reason = str(exc)[:200]
+            self.record.note(
+                self.now(), FAILED, agent=agent.name, key=where, exception=type(exc).__name__, reason=reason
+            )
+            if n == 1 or n % 100 == 0:
+                log.error("%s failed on %s (%d so far)", agent.name, where, n, exc_info=True)
+            return []
+
+    def _publish(self, agent: Agent, sends: list[Send]) -> None:
+        session = self._sessions[agent.name]
+        for s in sends:
+            self.record.sent(self.now(), session.name, s.key, s.message)
+            session.put(s.key, encode(s.message), reliable=keys.reliable(s.key))
