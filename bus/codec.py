@@ -22,12 +22,12 @@ log = logging.getLogger(__name__)
 
 # Bytes. Sized from the largest message the schema admits, so no message a
 # sender may build is refused as oversized: a guidance whose region, boundary
-# and possible each hold 64 lines of 4096 points encodes to 14.3 MiB, and the
-# 16 MiB cap leaves a 12 % margin. Real guidance is far smaller (measured: at
-# most 8 KB in the search game on campus-250x200, 39 KB in open-loop, whose
-# planned paths are the longest lines); the cap only spares a peer from
-# parsing anything bigger than a message can be.
-MAX_PAYLOAD = 16 << 20
+# and possible each hold OUTLINE_POINTS points, with every other list full,
+# encodes to about 245 KB, and the 256 KiB cap leaves a few per cent of margin.
+# Real guidance is far smaller (measured: at most 8 KB in the search game on
+# campus-250x200, 39 KB in open-loop, whose planned paths are the longest
+# lines); the cap spares a peer from parsing anything bigger than a message can be.
+MAX_PAYLOAD = 256 << 10
 _ENCODER = msgspec.msgpack.Encoder()
 _DECODER = msgspec.msgpack.Decoder(AnyMessage)
 

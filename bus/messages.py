@@ -29,9 +29,14 @@ Speed = Annotated[float, msgspec.Meta(ge=0.0, le=1e3)]
 Sequence = Annotated[int, msgspec.Meta(ge=0, le=2**63 - 1)]
 # GeoJSON's order, as the maps use: longitude first.
 Point = tuple[Longitude, Latitude]
-# A closed ring or an open line of up to 4096 points; up to 64 of them.
-Line = Annotated[list[Point], msgspec.Meta(max_length=4096)]
-Lines = Annotated[list[Line], msgspec.Meta(max_length=64)]
+OUTLINE_LINES = 64
+OUTLINE_POINTS = 4096
+"""An outline (a region, a set of lines) is up to ``OUTLINE_LINES`` closed rings
+or open lines of ``OUTLINE_POINTS`` points in all: more than a phone's screen
+can show, and few enough that the largest guidance stays a fraction of a
+megabyte on a cellular link."""
+Line = Annotated[list[Point], msgspec.Meta(max_length=OUTLINE_POINTS)]
+Lines = Annotated[list[Line], msgspec.Meta(max_length=OUTLINE_LINES)]
 Text = Annotated[str, msgspec.Meta(max_length=200)]
 
 
@@ -121,6 +126,10 @@ class Guidance(Message, tag="guidance"):
         super().__post_init__()
         if self.value is not None and not math.isfinite(self.value):
             raise ValueError("value must be finite")
+        for name in ("region", "boundary", "possible"):
+            points = sum(len(line) for line in getattr(self, name))
+            if points > OUTLINE_POINTS:
+                raise ValueError(f"{name} has {points} points in all, more than {OUTLINE_POINTS}")
 
 
 class GameState(Message, tag="state"):

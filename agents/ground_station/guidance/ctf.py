@@ -69,11 +69,11 @@ class CtfAdvisor:
                 self.attacker,
                 report.defender_heading,
             )
-        region = polygon_rings(self.solved.polygons(values, side), self._simplify)
+        region = polygon_rings(self.solved.polygons(values, side))
         return {
             "game": "ctf",
             "heading": None if heading is None else bearing(*heading),
-            "region": on_the_wire(self.map, region),
+            "region": on_the_wire(self.map, region, self._simplify),
             "region_of": region_of,
             "go": report.winner == "attacker" if agent == self.attacker else None,
             "value": float(report.value),

@@ -73,7 +73,7 @@ class ReachAvoidAdvisor:
             aim = path[min(int(np.searchsorted(along, 3.0 * max(self.grid.spacing))), len(path) - 1)]
             if np.hypot(*(aim - a)) > 1e-9:
                 fields["heading"] = bearing(*(aim - a))
-            fields["boundary"] = on_the_wire(self.map, [path[:: max(1, len(path) // 2000)]])
+            fields["boundary"] = on_the_wire(self.map, [path], 0.25 * min(self.grid.spacing))
             fields["value"] = float(solution.value)
         return fields
 

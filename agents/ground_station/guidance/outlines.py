@@ -1,7 +1,6 @@
 """Regions and lines as guidance carries them: rings and lines of WGS84
-``[lon, lat]`` points (GeoJSON's order, as the maps use), at most
-``MAX_LINES`` of up to ``MAX_LINE_POINTS`` points each, the limits the
-message schema enforces."""
+``[lon, lat]`` points (GeoJSON's order, as the maps use), within the
+message's limits on lines and points per outline."""
 
 from __future__ import annotations
 
@@ -9,32 +8,32 @@ import contourpy
 import numpy as np
 import shapely
 
+from bearcat.bus.messages import OUTLINE_LINES, OUTLINE_POINTS
 from bearcat.maps import Map
 
-MAX_LINES = 64
-MAX_LINE_POINTS = 4096
 
+def on_the_wire(game_map: Map, lines, tolerance: float = 0.25) -> list[list[tuple[float, float]]]:
+    """``lines`` (arrays of map-metre points) as ``[lon, lat]`` lists.
 
-def on_the_wire(game_map: Map, lines) -> list[list[tuple[float, float]]]:
-    """``lines`` (arrays of map-metre points) as ``[lon, lat]`` lists, cut to the schema's limits."""
+    The longest ``OUTLINE_LINES`` lines are kept. While they hold more than
+    ``OUTLINE_POINTS`` points in all, each is simplified (Douglas-Peucker,
+    which keeps a ring closed) with a tolerance that doubles from
+    ``tolerance`` metres, so an outline loses detail rather than parts.
+    """
+    kept = sorted((np.asarray(line, dtype=float) for line in lines), key=len, reverse=True)[:OUTLINE_LINES]
+    while sum(len(line) for line in kept) > OUTLINE_POINTS:
+        kept = [np.asarray(shapely.LineString(line).simplify(tolerance).coords) for line in kept]
+        tolerance *= 2.0
     out = []
-    for line in lines[:MAX_LINES]:
-        line = np.asarray(line)[:MAX_LINE_POINTS]
+    for line in kept:
         lat, lon = game_map.to_geodetic(line[:, 0], line[:, 1])
         out.append(list(zip(np.atleast_1d(lon).tolist(), np.atleast_1d(lat).tolist())))
     return out
 
 
-def polygon_rings(region, tolerance: float) -> list[np.ndarray]:
-    """The exterior rings of a shapely (Multi)Polygon, a ring of more points
-    than the wire carries simplified by ``tolerance`` metres first."""
-    rings = []
-    for polygon in shapely.get_parts(region):
-        ring = polygon.exterior
-        if len(ring.coords) > MAX_LINE_POINTS:
-            ring = ring.simplify(tolerance)
-        rings.append(np.asarray(ring.coords))
-    return rings
+def polygon_rings(region) -> list[np.ndarray]:
+    """The exterior rings of a shapely (Multi)Polygon."""
+    return [np.asarray(polygon.exterior.coords) for polygon in shapely.get_parts(region)]
 
 
 def mask_rings(grid, mask: np.ndarray) -> list[np.ndarray]:
