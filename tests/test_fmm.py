@@ -8,8 +8,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
+from bearcat.solvers.descent import descend
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.fmm import descend, point_source, time_to_capture, travel_time
+from bearcat.solvers.fmm import point_source, time_to_capture, travel_time
 from bearcat.solvers.grid import Grid
 
 
