@@ -20,14 +20,16 @@ __all__ = ["bilinear", "finite_corners"]
 
 @numba.njit(cache=True)
 def finite_corners(a, px, py):
-    """The cell of ``a`` holding ``(px, py)`` (clamped into the array), as its
+    """The cell of ``a`` holding ``(px, py)``, clamped into the array, as its
     lowest node ``(i, j)``, and the bilinear weights of its corners ``(i, j)``,
     ``(i, j + 1)``, ``(i + 1, j)``, ``(i + 1, j + 1)``: 0 for an infinite
     corner, so corner ``k`` is ``a[i + k // 2, j + k % 2]`` where its weight
     is positive."""
     nx, ny = a.shape
-    i = min(max(int(math.floor(px)), 0), nx - 2)
-    j = min(max(int(math.floor(py)), 0), ny - 2)
+    px = min(max(px, 0.0), nx - 1.0)
+    py = min(max(py, 0.0), ny - 1.0)
+    i = min(int(math.floor(px)), nx - 2)
+    j = min(int(math.floor(py)), ny - 2)
     fx = px - i
     fy = py - j
     w00 = (1.0 - fx) * (1.0 - fy)

@@ -178,6 +178,21 @@ def test_cached_fronts_give_the_same_sets_as_fresh_travel_times(domains):
     assert travel_times.travel_time((2.0, 2.0)) is travel_times.travel_time((2.0, 2.0))
 
 
+def test_strategies_sharing_travel_times_share_fronts_and_the_safe_set(domains):
+    """The evader and the pursuers asking about one state build its safe set
+    once; a front and its time to capture are built once per position."""
+    travel_times, _ = domains["square-10"]
+    e, ps = (5.0, 5.0), [(1.0, 1.5), (8.5, 2.0)]
+    FarthestPointEvader(travel_times).heading(e, ps)
+    shared = safe_set(travel_times, e, ps)
+    assert FmmAreaPursuit(travel_times).area_gradient(e, ps).safe is shared
+    front = travel_times.front(np.array(ps[0]))
+    assert travel_times.front(np.array(ps[0])) is front
+    assert front.capture_time(0.5) is travel_times.capture_time(ps[0], 0.5)
+    np.testing.assert_array_equal(front.capture_time(0.0), front.times)  # capture on contact
+    assert front.source_speed == 1.0
+
+
 def test_bad_inputs_name_the_culprit(domains):
     travel_times, _ = domains["triangle-10"]
     with pytest.raises(InputError, match="pursuer 2"):
