@@ -239,6 +239,29 @@ def _edges(mask, free, owner):
 
 
 @numba.njit(cache=True)
+def _ends(ka, kb, ny, hx, hy):
+    """The nodes of flat indices ``ka`` and ``kb`` and their midpoint (metres from the first node)."""
+    ai = ka // ny
+    aj = ka - ai * ny
+    bi = kb // ny
+    bj = kb - bi * ny
+    return ai, aj, bi, bj, 0.5 * (ai + bi) * hx, 0.5 * (aj + bj) * hy
+
+
+@numba.njit(cache=True)
+def _arrival(field, speed, v0, hx, hy, px, py, qx, qy, i, j):
+    """The direction in which the front ``field`` of an agent at ``p`` arrives
+    at ``q`` (node ``(i, j)`` or beside it), and whether ``q`` is in the
+    agent's sight: the straight line from ``p`` there, the finite-difference
+    gradient of ``field`` at the node elsewhere."""
+    r = math.hypot(qx - px, qy - py)
+    if r > 0.0 and sees(speed, v0, hx, hy, px, py, qx, qy):
+        return (qx - px) / r, (qy - py) / r, True
+    ux, uy = _unit_slope(field, i, j, hx, hy)
+    return ux, uy, False
+
+
+@numba.njit(cache=True)
 def _unit_slope(field, i, j, hx, hy):
     """Direction of the finite-difference gradient of ``field`` at a node."""
     gx = _slope(field, i, j, 1, 0, hx)
@@ -277,33 +300,11 @@ def _edge_terms(a, b, xa, xb, psi, psic, phi, speed, px, py, v0, vp, ex, ey, v0e
     missing = np.zeros(m, dtype=np.bool_)
     have_rays = rays.shape[0] == nx
     for q in range(m):
-        ai = a[q] // ny
-        aj = a[q] - ai * ny
-        bi = b[q] // ny
-        bj = b[q] - bi * ny
-        cx = 0.5 * (ai + bi) * hx
-        cy = 0.5 * (aj + bj) * hy
-        xai = xa[q] // ny
-        xaj = xa[q] - xai * ny
-        xbi = xb[q] // ny
-        xbj = xb[q] - xbi * ny
-        sx = 0.5 * (xai + xbi) * hx
-        sy = 0.5 * (xaj + xbj) * hy
-        # The pursuer's arrival direction at X, and whether X is in its sight.
-        rp = math.hypot(sx - px, sy - py)
-        seen_p = rp > 0.0 and sees(speed, v0, hx, hy, px, py, sx, sy)
-        if seen_p:
-            upx = (sx - px) / rp
-            upy = (sy - py) / rp
-        else:
-            upx, upy = _unit_slope(psi, xai, xaj, hx, hy)
-        # The evader's.
-        re = math.hypot(cx - ex, cy - ey)
-        if re > 0.0 and sees(speed, v0e, hx, hy, ex, ey, cx, cy):
-            uex = (cx - ex) / re
-            uey = (cy - ey) / re
-        else:
-            uex, uey = _unit_slope(phi, ai, aj, hx, hy)
+        ai, aj, bi, bj, cx, cy = _ends(a[q], b[q], ny, hx, hy)
+        xai, xaj, xbi, xbj, sx, sy = _ends(xa[q], xb[q], ny, hx, hy)
+        # The pursuer's arrival direction at X, and whether X is in its sight; the evader's at c.
+        upx, upy, seen_p = _arrival(psi, speed, v0, hx, hy, px, py, sx, sy, xai, xaj)
+        uex, uey, _ = _arrival(phi, speed, v0e, hx, hy, ex, ey, cx, cy, ai, aj)
         sp = 1.0 / (vp * speed[xai, xaj])
         se = 1.0 / (ve * speed[ai, aj])
         gx = sp * upx - se * uex

@@ -65,7 +65,6 @@ def first_steps(psi, speed, hx, hy, sx, sy, v0, limit):
     for k in order:
         i = k // ny
         j = k - i * ny
-        t = psi[i, j]
         dx = i * hx - sx
         dy = j * hy - sy
         r = math.hypot(dx, dy)
@@ -84,27 +83,16 @@ def first_steps(psi, speed, hx, hy, sx, sy, v0, limit):
                 out[i, j, 1] = dy / r
             continue
         seen[i, j] = 0.0
+        wx, ui = _upwind(psi, i, j, 1, 0, hx)
+        wy, uj = _upwind(psi, i, j, 0, 1, hy)
         ex = 0.0
         ey = 0.0
-        ws = 0.0
-        lo = psi[i - 1, j] if i > 0 else np.inf
-        hi = psi[i + 1, j] if i < nx - 1 else np.inf
-        up = i - 1 if lo <= hi else i + 1
-        b = min(lo, hi)
-        if b < t:
-            w = (t - b) / (hx * hx)
-            ex += w * out[up, j, 0]
-            ey += w * out[up, j, 1]
-            ws += w
-        lo = psi[i, j - 1] if j > 0 else np.inf
-        hi = psi[i, j + 1] if j < ny - 1 else np.inf
-        up = j - 1 if lo <= hi else j + 1
-        b = min(lo, hi)
-        if b < t:
-            w = (t - b) / (hy * hy)
-            ex += w * out[i, up, 0]
-            ey += w * out[i, up, 1]
-            ws += w
+        if wx > 0.0:
+            ex += wx * out[ui, j, 0]
+            ey += wx * out[ui, j, 1]
+        if wy > 0.0:
+            ex += wy * out[i, uj, 0]
+            ey += wy * out[i, uj, 1]
         norm = math.hypot(ex, ey)
         if norm > 0.0:
             out[i, j, 0] = ex / norm
@@ -113,6 +101,21 @@ def first_steps(psi, speed, hx, hy, sx, sy, v0, limit):
             out[i, j, 0] = dx / r
             out[i, j, 1] = dy / r
     return out
+
+
+@numba.njit(cache=True)
+def _upwind(psi, i, j, di, dj, h):
+    """The weight the eikonal update gives the earlier neighbour of node
+    ``(i, j)`` along axis ``(di, dj)`` (0 if neither arrived earlier), and
+    that neighbour's index along the axis."""
+    n = psi.shape[0] if di else psi.shape[1]
+    k = i if di else j
+    lo = psi[i - di, j - dj] if k > 0 else np.inf
+    hi = psi[i + di, j + dj] if k < n - 1 else np.inf
+    b = min(lo, hi)
+    if b < psi[i, j]:
+        return (psi[i, j] - b) / (h * h), k - 1 if lo <= hi else k + 1
+    return 0.0, k
 
 
 @numba.njit(cache=True)
