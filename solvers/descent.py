@@ -18,7 +18,7 @@ import numpy as np
 from bearcat.solvers import fmm
 from bearcat.solvers.errors import InputError, format_point
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.interpolation import bilinear, finite_corners
+from bearcat.solvers.interpolation import bilinear, upwind_gradient
 
 __all__ = ["Descent", "descend", "descend_steps"]
 
@@ -151,7 +151,7 @@ def _descend(phi, stop, hx, hy, px, py, max_steps):
             py = float(iy)
             v = phi[ix, iy]
         else:
-            gx, gy = _gradient(phi, px, py, hx, hy)
+            gx, gy = upwind_gradient(phi, px, py, hx, hy)
             norm = math.hypot(gx, gy)
             moved = False
             if norm > 0.0:
@@ -201,36 +201,3 @@ def _grow(a):
     for k in range(a.size):
         b[k] = a[k]
     return b
-
-
-@numba.njit(cache=True)
-def _gradient(phi, px, py, hx, hy):
-    """Gradient at a fractional index: each finite corner's difference toward
-    its lower finite neighbour on each axis, blended with the bilinear weights
-    of ``bilinear``; zero where no corner is finite."""
-    i, j, w = finite_corners(phi, px, py)
-    gx = 0.0
-    gy = 0.0
-    den = 0.0
-    for k in range(4):
-        if w[k] > 0.0:
-            a = i + k // 2
-            b = j + k % 2
-            c = phi[a, b]
-            gx += w[k] * _upwind(c, phi, a, b, 1, 0) / hx
-            gy += w[k] * _upwind(c, phi, a, b, 0, 1) / hy
-            den += w[k]
-    if den == 0.0:
-        return 0.0, 0.0
-    return gx / den, gy / den
-
-
-@numba.njit(cache=True)
-def _upwind(c, phi, i, j, di, dj):
-    """Difference toward the lower finite neighbour along one axis (0 at a minimum)."""
-    nx, ny = phi.shape
-    lo = phi[i - di, j - dj] if i - di >= 0 and j - dj >= 0 else np.inf
-    hi = phi[i + di, j + dj] if i + di < nx and j + dj < ny else np.inf
-    if lo <= hi:
-        return c - lo if lo < c else 0.0
-    return hi - c if hi < c else 0.0

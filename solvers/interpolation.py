@@ -5,7 +5,7 @@ An infinite node (blocked, not reached by a front, not known yet) drops out
 and the other corners' weights are renormalised, so a value or a gradient
 read next to an obstacle or the edge of a front stays finite. Arrays are
 indexed ``[ix, iy]``; a fractional index ``(px, py)`` is in nodes from the
-first one.
+first one, clamped into the array.
 """
 
 from __future__ import annotations
@@ -15,16 +15,30 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["bilinear", "finite_corners"]
+__all__ = ["bilinear", "upwind_gradient"]
 
 
 @numba.njit(cache=True)
-def finite_corners(a, px, py):
-    """The cell of ``a`` holding ``(px, py)``, clamped into the array, as its
-    lowest node ``(i, j)``, and the bilinear weights of its corners ``(i, j)``,
-    ``(i, j + 1)``, ``(i + 1, j)``, ``(i + 1, j + 1)``: 0 for an infinite
-    corner, so corner ``k`` is ``a[i + k // 2, j + k % 2]`` where its weight
-    is positive."""
+def bilinear(a, px, py):
+    """The value of ``a`` at ``(px, py)`` from the finite corners of its cell,
+    their weights renormalised; infinity where none of weight is finite."""
+    value, _, _ = _blend(a, px, py, 1.0, 1.0, False)
+    return value
+
+
+@numba.njit(cache=True)
+def upwind_gradient(a, px, py, hx, hy):
+    """The gradient of ``a`` at ``(px, py)`` for node spacings ``hx, hy``:
+    each finite corner's difference toward its lower finite neighbour on each
+    axis (0 at a minimum), blended with the weights of ``bilinear``; zero
+    where no corner is finite. Upwind differences of a value function point
+    down its characteristics, where central ones would straddle a kink."""
+    _, gx, gy = _blend(a, px, py, hx, hy, True)
+    return gx, gy
+
+
+@numba.njit(cache=True, inline="always")
+def _blend(a, px, py, hx, hy, gradient):
     nx, ny = a.shape
     px = min(max(px, 0.0), nx - 1.0)
     py = min(max(py, 0.0), ny - 1.0)
@@ -32,33 +46,31 @@ def finite_corners(a, px, py):
     j = min(int(math.floor(py)), ny - 2)
     fx = px - i
     fy = py - j
-    w00 = (1.0 - fx) * (1.0 - fy)
-    w01 = (1.0 - fx) * fy
-    w10 = fx * (1.0 - fy)
-    w11 = fx * fy
-    return (
-        i,
-        j,
-        (
-            w00 if w00 > 0.0 and a[i, j] < np.inf else 0.0,
-            w01 if w01 > 0.0 and a[i, j + 1] < np.inf else 0.0,
-            w10 if w10 > 0.0 and a[i + 1, j] < np.inf else 0.0,
-            w11 if w11 > 0.0 and a[i + 1, j + 1] < np.inf else 0.0,
-        ),
-    )
-
-
-@numba.njit(cache=True)
-def bilinear(a, px, py):
-    """The value of ``a`` at ``(px, py)`` from the finite corners of its cell,
-    their weights renormalised; infinity where none of weight is finite."""
-    i, j, w = finite_corners(a, px, py)
     num = 0.0
+    gx = 0.0
+    gy = 0.0
     den = 0.0
-    for k in range(4):
-        if w[k] > 0.0:
-            num += w[k] * a[i + k // 2, j + k % 2]
-            den += w[k]
+    for u in range(2):
+        for v in range(2):
+            w = (fx if u else 1.0 - fx) * (fy if v else 1.0 - fy)
+            c = a[i + u, j + v]
+            if w > 0.0 and c < np.inf:
+                num += w * c
+                if gradient:
+                    gx += w * _upwind(c, a, i + u, j + v, 1, 0) / hx
+                    gy += w * _upwind(c, a, i + u, j + v, 0, 1) / hy
+                den += w
     if den == 0.0:
-        return np.inf
-    return num / den
+        return np.inf, 0.0, 0.0
+    return num / den, gx / den, gy / den
+
+
+@numba.njit(cache=True, inline="always")
+def _upwind(c, a, i, j, di, dj):
+    """Difference toward the lower finite neighbour along one axis (0 at a minimum)."""
+    nx, ny = a.shape
+    lo = a[i - di, j - dj] if i - di >= 0 and j - dj >= 0 else np.inf
+    hi = a[i + di, j + dj] if i + di < nx and j + dj < ny else np.inf
+    if lo <= hi:
+        return c - lo if lo < c else 0.0
+    return hi - c if hi < c else 0.0
