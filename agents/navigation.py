@@ -17,6 +17,7 @@ import shapely
 from bearcat.maps import Map, rasterize
 from bearcat.maps.raster import covered
 from bearcat.solvers import fmm
+from bearcat.solvers.descent import descend
 
 LOOK_AHEAD = 2.0  # metres along the path the returned direction aims at
 
@@ -46,7 +47,7 @@ class Navigator:
         if not math.isfinite(phi[i, j]):
             return None
         try:
-            path = fmm.descend(self.grid, phi, p, seeds=seeds).points
+            path = descend(self.grid, phi, p, seeds=seeds).points
         except ValueError:
             return None
         along = np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])

@@ -5,11 +5,11 @@ thesis's non-convex domains at 0.1 m (101 x 101 nodes).
 
 A control step is ``FmmAreaPursuit.headings`` for a new state: the evader and
 every pursuer stand somewhere they did not stand before, so no front is in
-the arena's cache. The thesis took about 100 ms per pursuer (Matlab, 2012);
-the issue asks for under 5 ms for three pursuers. Also timed: pure pursuit
+the travel times' cache. The thesis took about 100 ms per pursuer (Matlab, 2012);
+the aim is under 5 ms for three pursuers. Also timed: pure pursuit
 along the geodesic, and a whole game step: the farthest-point evader picks a
 new target (forced every step, the dearer case), then the pursuers' headings
-on the same arena reuse the fronts and the safe set it computed.
+on the same travel times reuse the fronts and the safe set it computed.
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from bearcat.maps import load_map, rasterize
-from bearcat.solvers.pursuit_fmm import FarthestPointEvader, FmmAreaPursuit, FmmArena, GeodesicPursuit
+from bearcat.solvers.pursuit_fmm import FarthestPointEvader, FmmAreaPursuit, GeodesicPursuit, TravelTimes
 
 MAPS = ("triangle-10", "maze-10")
 SPACING = 0.1
@@ -65,11 +65,11 @@ def main() -> None:
             cases = states(raster, n, args.repeats + 1, seed=n)
             row = []
             for gradient in ("boundary", "finite"):
-                strategy = FmmAreaPursuit(FmmArena(raster.grid, raster.speed), gradient=gradient)
+                strategy = FmmAreaPursuit(TravelTimes(raster.grid, raster.speed), gradient=gradient)
                 row.append(median_ms(strategy.headings, cases))
-            row.append(median_ms(GeodesicPursuit(FmmArena(raster.grid, raster.speed)).headings, cases))
-            arena = FmmArena(raster.grid, raster.speed)
-            pursuit, evader = FmmAreaPursuit(arena), FarthestPointEvader(arena)
+            row.append(median_ms(GeodesicPursuit(TravelTimes(raster.grid, raster.speed)).headings, cases))
+            travel_times = TravelTimes(raster.grid, raster.speed)
+            pursuit, evader = FmmAreaPursuit(travel_times), FarthestPointEvader(travel_times)
 
             def game_step(e, ps, evader=evader, pursuit=pursuit):
                 evader.target = None  # a fresh target every step: the dearer case

@@ -231,9 +231,9 @@ class _Domain:
         """The fast-marching arena of a non-convex domain (None for a convex one, which needs none)."""
         if self.kind == "convex":
             return None
-        from bearcat.solvers.pursuit_fmm import FmmArena
+        from bearcat.solvers.pursuit_fmm import TravelTimes
 
-        return FmmArena(self.grid, self.raster_speed)
+        return TravelTimes(self.grid, self.raster_speed)
 
 
 @lru_cache(maxsize=8)

@@ -30,13 +30,12 @@ map into a ``CtfGeometry`` and caching solutions on disk live at the edges.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.errors import InputError, non_negative, positive
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Player, SimpleMotion
 from bearcat.solvers.hji import PaddedField, ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
@@ -119,11 +118,8 @@ class Rules:
 
     def __post_init__(self) -> None:
         for name in ("attacker_speed", "defender_speed", "capture_time", "return_time"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-                raise InputError(f"{name.replace('_', ' ')} must be a positive number, got {value!r}")
-        if not (math.isfinite(self.capture_radius) and self.capture_radius >= 0):
-            raise InputError(f"capture radius must be a number >= 0, got {self.capture_radius!r}")
+            object.__setattr__(self, name, positive(getattr(self, name), name.replace("_", " ")))
+        object.__setattr__(self, "capture_radius", non_negative(self.capture_radius, "capture radius"))
 
 
 @dataclass(frozen=True, eq=False)

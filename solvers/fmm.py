@@ -5,6 +5,7 @@ times (a defender's ``psi``). With a per-node ``ceiling`` it is the modified
 method of thesis 4.1.3: a node whose value, when it is accepted, is not below
 its ceiling (the defenders' time-to-capture) is set to infinity and stops the
 front there, so the finite nodes are exactly the safe-reachable set.
+Optimal paths run down the result (``solvers.descent``).
 
 Arrays are indexed ``[ix, iy]`` (x east, y north); ``spacing`` is ``h`` or
 ``(hx, hy)`` in metres, speeds are metres per second, values are seconds.
@@ -13,15 +14,14 @@ Arrays are indexed ``[ix, iy]`` (x east, y north); ``spacing`` is ``h`` or
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numba
 import numpy as np
 
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.errors import InputError, format_point, non_negative
 from bearcat.solvers.grid import Grid
 
-__all__ = ["Descent", "descend", "point_source", "time_to_capture", "travel_time"]
+__all__ = ["march", "point_source", "source_stencil", "time_to_capture", "travel_time"]
 
 _FAR = -1  # node states in the queue-slot array
 _DONE = -2
@@ -92,7 +92,7 @@ def point_source(grid: Grid, point, speed) -> np.ndarray:
     speed = np.asarray(speed, dtype=np.float64)
     if speed.shape != grid.shape:
         raise InputError(f"speed has shape {speed.shape} but the grid has shape {grid.shape}")
-    ix, iy, dist = _source_stencil(grid, point)
+    ix, iy, dist = source_stencil(grid, point)
     v = speed[ix, iy]
     initial = np.full(grid.shape, np.inf)
     passable = v > 0
@@ -114,9 +114,7 @@ def time_to_capture(psi, spacing, radius: float) -> np.ndarray:
     """
     psi = np.asarray(psi, dtype=np.float64)
     hx, hy = _spacing(spacing)
-    radius = float(radius)
-    if not (radius >= 0 and math.isfinite(radius)):
-        raise InputError(f"capture radius must be a finite number >= 0, got {radius}")
+    radius = non_negative(radius, "capture radius")
     if radius == 0:
         return psi
     return _disk_min(np.ascontiguousarray(psi), disk_widths(radius, hx, hy))
@@ -137,75 +135,7 @@ def disk_widths(radius: float, hx: float, hy: float) -> np.ndarray:
     )
 
 
-@dataclass(frozen=True)
-class Descent:
-    """A steepest-descent path through a value function, from its start downhill.
-
-    ``points`` (n, 2) in metres and ``values`` (n,) the value there, strictly
-    decreasing. ``reached`` tells whether it ended on the seeds or source
-    rather than at a node it could not descend from.
-    """
-
-    points: np.ndarray
-    values: np.ndarray
-    reached: bool
-
-
-def descend(grid: Grid, phi, start, *, seeds=None, source=None) -> Descent:
-    """Follow ``x' = -grad phi / |grad phi|`` from ``start`` until the seeds.
-
-    This integrates the optimal-path ODE (thesis 4.12) backwards in time.
-    ``seeds`` is a boolean mask of nodes where ``phi`` holds its prescribed
-    boundary value; the path stops on the first of them it reaches. With
-    ``source``, the point ``phi`` was started from by ``point_source``, the
-    path stops on that stencil and ends exactly at ``source`` with value 0.
-    With neither, it stops where no neighbour is lower.
-
-    Steps are half the smaller spacing along the interpolated upwind
-    gradient. A step that would leave the finite part of ``phi`` or not lower
-    the value is replaced by a move to the lowest finite neighbouring node, so
-    the path never enters an obstacle or the unsafe set, and ends.
-    """
-    phi = np.ascontiguousarray(phi, dtype=np.float64)
-    if phi.shape != grid.shape:
-        raise InputError(f"phi has shape {phi.shape} but the grid has shape {grid.shape}")
-    if not grid.contains(start):
-        raise InputError(f"start point {_fmt(start)} lies outside the grid")
-    stop = np.zeros(grid.shape, dtype=np.bool_)
-    if seeds is not None:
-        seeds = np.asarray(seeds, dtype=np.bool_)
-        if seeds.shape != grid.shape:
-            raise InputError(f"seeds has shape {seeds.shape} but the grid has shape {grid.shape}")
-        stop |= seeds
-    if source is not None:
-        if not grid.contains(source):
-            raise InputError(f"source point {_fmt(source)} lies outside the grid")
-        ix, iy, _ = _source_stencil(grid, source)
-        stop[ix, iy] = True
-    hx, hy = grid.spacing
-    fi = grid.fractional_index(start)
-    xs, ys, vals, status = _descend(
-        phi, stop, float(hx), float(hy), float(fi[0]), float(fi[1]), np.int64(4 * grid.size + 16)
-    )
-    if status == _START_INVALID:
-        raise InputError(f"start point {_fmt(start)} is not on a finite value of phi")
-    points = np.asarray(grid.lo) + np.column_stack([xs, ys]) * np.asarray(grid.spacing)
-    reached = status == _STOPPED
-    if source is not None and reached:
-        source = np.asarray(source, dtype=np.float64)
-        if np.abs(points[-1] - source).max() <= 1e-9 * min(hx, hy):
-            points[-1], vals[-1] = source, 0.0  # ended on the source's own node
-        else:
-            points = np.vstack([points, source])
-            vals = np.append(vals, 0.0)
-    return Descent(points=points, values=vals, reached=bool(reached))
-
-
 # --------------------------------------------------------------------------- helpers
-
-
-def _fmt(point) -> str:
-    return "(" + ", ".join(f"{float(c):g}" for c in np.ravel(point)) + ")"
 
 
 def _spacing(spacing) -> tuple[float, float]:
@@ -232,11 +162,11 @@ def _check_march_inputs(speed, spacing, initial):
     return speed, hx, hy, initial
 
 
-def _source_stencil(grid: Grid, point):
+def source_stencil(grid: Grid, point):
     """Nodes seeded for a source at ``point`` and their distances to it."""
     p = np.asarray(point, dtype=np.float64)
     if p.shape != (2,) or not grid.contains(p):
-        raise InputError(f"point {_fmt(point)} lies outside the grid")
+        raise InputError(f"point {format_point(point)} lies outside the grid")
     fi = grid.fractional_index(p)
     shape = np.asarray(grid.shape)
     cell = np.clip(np.floor(fi).astype(np.int64), 0, shape - 2)
@@ -550,128 +480,3 @@ def _disk_min(psi, widths):
                     for y in range(ny):
                         out[x, y] = min(out[x, y], rows[xs, y])
     return out
-
-
-_STOPPED = 0
-_STUCK = 1
-_START_INVALID = 2
-
-
-@numba.njit(cache=True)
-def _descend(phi, stop, hx, hy, px, py, max_steps):
-    """Descent from fractional index ``(px, py)``; see ``descend``."""
-    nx, ny = phi.shape
-    xs = np.empty(256)
-    ys = np.empty(256)
-    vals = np.empty(256)
-    px = min(max(px, 0.0), nx - 1.0)
-    py = min(max(py, 0.0), ny - 1.0)
-    if not phi[int(px + 0.5), int(py + 0.5)] < np.inf:
-        return xs[:0], ys[:0], vals[:0], _START_INVALID
-    v, _, _ = _sample(phi, px, py, hx, hy)
-    step = 0.5 * min(hx, hy)
-    xs[0] = px
-    ys[0] = py
-    vals[0] = v
-    m = 1
-    status = _STUCK
-    for _ in range(max_steps):
-        ix = int(px + 0.5)
-        iy = int(py + 0.5)
-        if stop[ix, iy]:
-            status = _STOPPED
-            if phi[ix, iy] >= v:
-                break
-            px = float(ix)
-            py = float(iy)
-            v = phi[ix, iy]
-        else:
-            _, gx, gy = _sample(phi, px, py, hx, hy)
-            norm = math.hypot(gx, gy)
-            moved = False
-            if norm > 0.0:
-                qx = px - step * gx / (norm * hx)
-                qy = py - step * gy / (norm * hy)
-                inside = 0.0 <= qx <= nx - 1.0 and 0.0 <= qy <= ny - 1.0
-                if inside and phi[int(qx + 0.5), int(qy + 0.5)] < np.inf:
-                    vq, _, _ = _sample(phi, qx, qy, hx, hy)
-                    if vq < v:
-                        px = qx
-                        py = qy
-                        v = vq
-                        moved = True
-            if not moved:
-                # The lowest finite node around; a diagonal move needs an open
-                # side so it cannot slip between two blocked nodes.
-                bx = -1
-                by = -1
-                best = v
-                for a in range(max(ix - 1, 0), min(ix + 2, nx)):
-                    for b in range(max(iy - 1, 0), min(iy + 2, ny)):
-                        if phi[a, b] < best and (a == ix or b == iy or phi[a, iy] < np.inf or phi[ix, b] < np.inf):
-                            best = phi[a, b]
-                            bx = a
-                            by = b
-                if bx < 0:
-                    break
-                px = float(bx)
-                py = float(by)
-                v = best
-        if m == vals.size:
-            xs = _grow(xs)
-            ys = _grow(ys)
-            vals = _grow(vals)
-        xs[m] = px
-        ys[m] = py
-        vals[m] = v
-        m += 1
-        if status == _STOPPED:
-            break
-    return xs[:m], ys[:m], vals[:m], status
-
-
-@numba.njit(cache=True)
-def _grow(a):
-    b = np.empty(2 * a.size)
-    for k in range(a.size):
-        b[k] = a[k]
-    return b
-
-
-@numba.njit(cache=True)
-def _sample(phi, px, py, hx, hy):
-    """Value and gradient at a fractional index: bilinear over the finite
-    corners of the cell (reweighted), the gradient blending each corner's
-    difference toward its lower finite neighbour on each axis."""
-    nx, ny = phi.shape
-    i = min(int(px), nx - 2)
-    j = min(int(py), ny - 2)
-    fx = px - i
-    fy = py - j
-    num = 0.0
-    gx = 0.0
-    gy = 0.0
-    den = 0.0
-    for a in range(2):
-        for b in range(2):
-            w = (fx if a else 1.0 - fx) * (fy if b else 1.0 - fy)
-            c = phi[i + a, j + b]
-            if w > 0.0 and c < np.inf:
-                num += w * c
-                gx += w * _upwind(c, phi, i + a, j + b, 1, 0) / hx
-                gy += w * _upwind(c, phi, i + a, j + b, 0, 1) / hy
-                den += w
-    if den == 0.0:
-        return np.inf, 0.0, 0.0
-    return num / den, gx / den, gy / den
-
-
-@numba.njit(cache=True)
-def _upwind(c, phi, i, j, di, dj):
-    """Difference toward the lower finite neighbour along one axis (0 at a minimum)."""
-    nx, ny = phi.shape
-    lo = phi[i - di, j - dj] if i - di >= 0 and j - dj >= 0 else np.inf
-    hi = phi[i + di, j + dj] if i + di < nx and j + dj < ny else np.inf
-    if lo <= hi:
-        return c - lo if lo < c else 0.0
-    return hi - c if hi < c else 0.0

@@ -54,7 +54,6 @@ problems, so ``tol`` is in value units and should sit above that.
 from __future__ import annotations
 
 import math
-import numbers
 import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
@@ -64,7 +63,7 @@ import numba
 import numpy as np
 
 from bearcat.solvers import hji_kernels as kern
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.errors import InputError, fraction, non_negative, positive
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import lower
 
@@ -200,12 +199,10 @@ def solve_reach_avoid(
     dtype = np.dtype(dtype)
     if dtype not in (np.float32, np.float64):
         raise InputError(f"dtype must be float32 or float64, got {dtype}")
-    _check_positive("horizon", horizon)
-    _check_positive("check_every", check_every)
-    if not (math.isfinite(cfl) and 0 < cfl <= 1):
-        raise InputError(f"cfl must be in (0, 1], got {cfl}")
-    if not (math.isfinite(tol) and tol >= 0):
-        raise InputError(f"tol must be finite and >= 0, got {tol}")
+    horizon = positive(horizon, "horizon")
+    check_every = positive(check_every, "check_every")
+    cfl = fraction(cfl, "cfl")
+    tol = non_negative(tol, "tol")
     if grid.ndim < 2:
         raise InputError(f"the grid must have at least 2 dimensions, got {grid.ndim}")
     target = _grid_field("target", target, grid, dtype)
@@ -340,11 +337,6 @@ def _scheme(name: str) -> _Scheme:
         return SCHEMES[name]
     except (KeyError, TypeError):
         raise InputError(f"scheme must be one of {sorted(SCHEMES)}, got {name!r}") from None
-
-
-def _check_positive(name: str, value) -> None:
-    if not (isinstance(value, numbers.Real) and math.isfinite(value) and value > 0):
-        raise InputError(f"{name} must be a positive number, got {value!r}")
 
 
 def _grid_field(name: str, a, grid: Grid, dtype):

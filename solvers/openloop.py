@@ -22,7 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from bearcat.solvers import fmm
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.descent import descend
+from bearcat.solvers.errors import InputError, non_negative
 from bearcat.solvers.grid import Grid
 
 __all__ = ["Defender", "OpenLoopPath", "OpenLoopSolution", "StageSolution", "solve_openloop"]
@@ -196,9 +197,9 @@ def _extract_path(grid, attacker, stages, seeds) -> OpenLoopPath:
     start = stages[-1].goal
     for k in range(len(stages) - 1, -1, -1):
         if k:
-            d = fmm.descend(grid, stages[k].phi, start, seeds=seeds[k])
+            d = descend(grid, stages[k].phi, start, seeds=seeds[k])
         else:
-            d = fmm.descend(grid, stages[k].phi, start, source=attacker)
+            d = descend(grid, stages[k].phi, start, source=attacker)
         if not d.reached:
             raise RuntimeError(f"the optimal path could not be traced back through stage {k + 1}")
         pieces.append((d.points[::-1], d.values[::-1]))
@@ -223,10 +224,7 @@ def _check_defender(grid: Grid, defender: Defender, k: int):
     position = _check_point(grid, defender.position, name)
     speed = _check_speed(grid, defender.speed, f"{name} speed")
     _check_passable(grid, position, speed, name)
-    radius = float(defender.capture_radius)
-    if not (radius >= 0 and math.isfinite(radius)):
-        raise InputError(f"{name} capture radius must be a finite number >= 0, got {defender.capture_radius!r}")
-    return position, speed, radius
+    return position, speed, non_negative(defender.capture_radius, f"{name} capture radius")
 
 
 def _check_point(grid: Grid, point, name: str) -> np.ndarray:

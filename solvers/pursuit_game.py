@@ -21,7 +21,7 @@ from typing import Protocol
 
 import numpy as np
 
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.errors import InputError, non_negative, positive
 
 __all__ = ["Chase", "EvaderPolicy", "PursuitStrategy", "first_contact", "pursue"]
 
@@ -93,8 +93,9 @@ def pursue(
     p = np.array(pursuers, float, ndmin=2).copy()
     if e.shape != (2,) or p.ndim != 2 or p.shape[1] != 2 or len(p) == 0:
         raise InputError("the evader must be one point (x, y) and the pursuers a list of points")
-    if not (dt > 0 and max_time > 0 and capture_radius >= 0):
-        raise InputError("dt and max_time must be positive and the capture radius not negative")
+    dt = positive(dt, "dt")
+    max_time = positive(max_time, "max_time")
+    capture_radius = non_negative(capture_radius, "capture radius")
     speeds = np.broadcast_to(np.asarray(pursuer_speeds, float), (len(p),))
     for who, point in (("evader", e), *((f"pursuer {i + 1}", q) for i, q in enumerate(p))):
         if not passable(point):

@@ -78,9 +78,7 @@ def visibility(free, grid: Grid, point, max_range: float = math.inf) -> np.ndarr
     """
     free = _mask(free, grid, "free")
     p = _point(grid, point, "viewer")
-    max_range = float(max_range)
-    if not max_range >= 0:
-        raise InputError(f"max_range must be a number >= 0, got {max_range}")
+    max_range = non_negative(max_range, "max_range", finite=False)
     fx, fy = grid.fractional_index(p)
     hx, hy = grid.spacing
     return _visible(free, float(fx), float(fy), float(hx), float(hy), max_range)
@@ -196,9 +194,7 @@ class Weights:
 
     def __post_init__(self) -> None:
         for name in ("z", "z_tilde", "attacker", "uav"):
-            value = getattr(self, name)
-            if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
-                raise InputError(f"weight {name} must be a finite number >= 0, got {value!r}")
+            object.__setattr__(self, name, non_negative(getattr(self, name), f"weight {name}"))
 
 
 @dataclass(frozen=True, eq=False)
@@ -327,9 +323,7 @@ def lawnmower(bounds, r_q: float, start=None) -> np.ndarray:
     xmin, ymin, xmax, ymax = (float(v) for v in bounds)
     if not (all(math.isfinite(v) for v in (xmin, ymin, xmax, ymax)) and xmin < xmax and ymin < ymax):
         raise InputError(f"bounds must be finite (xmin, ymin, xmax, ymax) with min < max, got {bounds!r}")
-    r_q = non_negative(r_q, "footprint radius")
-    if r_q == 0:
-        raise InputError("a lawnmower needs a footprint radius > 0")
+    r_q = positive(r_q, "footprint radius")
     along_x = (xmax - xmin) >= (ymax - ymin)
     (a0, a1), (c0, c1) = ((xmin, xmax), (ymin, ymax)) if along_x else ((ymin, ymax), (xmin, xmax))
     count = max(1, math.ceil((c1 - c0) / (2 * r_q)))

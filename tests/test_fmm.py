@@ -1,4 +1,4 @@
-"""Fast marching against analytic travel times, capture min-filter, path descent."""
+"""Fast marching against analytic travel times, capture min-filter, path descent, bilinear reads."""
 
 import math
 
@@ -8,9 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
+from bearcat.solvers.descent import descend, descend_steps
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.fmm import descend, point_source, time_to_capture, travel_time
+from bearcat.solvers.fmm import point_source, time_to_capture, travel_time
 from bearcat.solvers.grid import Grid
+from bearcat.solvers.interpolation import bilinear
 
 
 def square(n, side=10.0):
@@ -345,6 +347,35 @@ def test_travel_time_rejects_bad_input(kwargs, culprit):
     args.update(kwargs)
     with pytest.raises(InputError, match=culprit):
         travel_time(**args)
+
+
+def test_bilinear_reads_the_finite_corners_only():
+    a = np.array([[1.0, 3.0], [np.inf, 5.0]])
+    assert bilinear(a, 0.0, 1.0) == 3.0  # a node reads its own value
+    # At the cell's centre the three finite corners weigh a quarter each, renormalised to a third.
+    assert bilinear(a, 0.5, 0.5) == pytest.approx(3.0)
+    assert bilinear(a, 0.25, 0.0) == 1.0  # the infinite corner drops out of this edge
+    assert bilinear(a, 1.0, 0.0) == np.inf  # on the infinite node, nothing finite has weight
+    assert bilinear(np.full((2, 2), np.inf), 0.5, 0.5) == np.inf
+    plane = np.add.outer(2.0 * np.arange(4.0), 3.0 * np.arange(5.0))
+    assert bilinear(plane, 2.25, 3.5) == pytest.approx(2.0 * 2.25 + 3.0 * 3.5)
+    assert bilinear(plane, 9.0, -1.0) == pytest.approx(bilinear(plane, 3.0, 0.0))  # clamped into the grid
+
+
+def test_descend_steps_look_ahead_from_the_nearest_reached_node():
+    g = square(41)
+    v = np.ones(g.shape)
+    src = (8.0, 8.0)
+    phi = travel_time(v, g.spacing, point_source(g, src, v))
+    path = descend_steps(g, phi, np.array([2.0, 2.0]), 4)
+    assert len(path) == 5
+    np.testing.assert_array_equal(path[0], (2.0, 2.0))
+    assert np.all(np.diff(np.hypot(*(path - src).T)) < 0)  # every step closer to the source
+    hidden = phi.copy()
+    hidden[g.nearest_index((2.0, 2.0))] = np.inf  # the start's own node is not reached
+    path = descend_steps(g, hidden, np.array([2.0, 2.0]), 4)
+    assert math.dist(path[0], (2.0, 2.0)) == pytest.approx(g.spacing[0])  # starts on a reached neighbour
+    assert descend_steps(g, np.full(g.shape, np.inf), np.array([2.0, 2.0]), 4) is None
 
 
 def test_point_source_and_descend_reject_bad_points():

@@ -12,8 +12,8 @@ from bearcat.solvers.errors import InputError
 from bearcat.solvers.pursuit_fmm import (
     FarthestPointEvader,
     FmmAreaPursuit,
-    FmmArena,
     GeodesicPursuit,
+    TravelTimes,
     safe_set,
 )
 
@@ -21,12 +21,12 @@ H = 0.1
 
 
 @pytest.fixture(scope="module")
-def arenas():
+def domains():
     """The three thesis domains at 0.1 m (101 x 101 nodes), with their rasters."""
     out = {}
     for name in ("square-10", "triangle-10", "maze-10"):
         raster = rasterize(load_map(name), H)
-        out[name] = (FmmArena(raster.grid, raster.speed), raster)
+        out[name] = (TravelTimes(raster.grid, raster.speed), raster)
     return out
 
 
@@ -98,9 +98,9 @@ SQUARE_CASES = [
 
 
 @pytest.mark.parametrize("e, pursuers", SQUARE_CASES)
-def test_equal_speeds_point_capture_gives_the_voronoi_cell(arenas, e, pursuers):
-    arena, raster = arenas["square-10"]
-    s = safe_set(arena, e, pursuers, capture_radius=0.0)
+def test_equal_speeds_point_capture_gives_the_voronoi_cell(domains, e, pursuers):
+    travel_times, raster = domains["square-10"]
+    s = safe_set(travel_times, e, pursuers, capture_radius=0.0)
     # Each node stands for its h x h cell, so the node count measures the
     # cell within the square grown by half a spacing.
     exact = voronoi_cell(e, pursuers, margin=H / 2).area
@@ -118,10 +118,10 @@ def test_equal_speeds_point_capture_gives_the_voronoi_cell(arenas, e, pursuers):
     np.testing.assert_array_equal(s.owner[outside], nearest[outside])
 
 
-def test_faster_pursuer_leaves_the_apollonius_disk(arenas):
-    arena, raster = arenas["square-10"]
+def test_faster_pursuer_leaves_the_apollonius_disk(domains):
+    travel_times, raster = domains["square-10"]
     e, p, k = np.array([4.1, 6.2]), np.array([6.3, 4.9]), 0.5  # evader at half the pursuer's speed
-    s = safe_set(arena, e, [p], pursuer_speeds=2.0, capture_radius=0.0)
+    s = safe_set(travel_times, e, [p], pursuer_speeds=2.0, capture_radius=0.0)
     centre = (e - k * k * p) / (1 - k * k)
     radius = k * np.linalg.norm(e - p) / (1 - k * k)
     r = np.hypot(raster.grid.mesh()[0] - centre[0], raster.grid.mesh()[1] - centre[1])
@@ -129,15 +129,15 @@ def test_faster_pursuer_leaves_the_apollonius_disk(arenas):
     np.testing.assert_array_equal(s.mask[~band], (r < radius)[~band])
 
 
-def test_safe_set_grows_as_a_slower_pursuer_approaches(arenas):
+def test_safe_set_grows_as_a_slower_pursuer_approaches(domains):
     """Thesis Fig. 5.4: a pursuer at half the evader's speed, d away, is first
     on the Apollonius disk of radius 2d/3 around it, which shrinks as it
     closes in, so S_e gets larger; a faster pursuer's approach shrinks S_e."""
-    arena, raster = arenas["square-10"]
+    travel_times, raster = domains["square-10"]
     e, u = np.array([2.0, 2.0]), np.array([0.8, 0.6])
     gaps = [4.0, 3.0, 2.0, 1.2]
-    slow = [safe_set(arena, e, [e + d * u], pursuer_speeds=0.5, capture_radius=0) for d in gaps]
-    fast = [safe_set(arena, e, [e + d * u], pursuer_speeds=1.5).area for d in gaps]
+    slow = [safe_set(travel_times, e, [e + d * u], pursuer_speeds=0.5, capture_radius=0) for d in gaps]
+    fast = [safe_set(travel_times, e, [e + d * u], pursuer_speeds=1.5).area for d in gaps]
     assert np.all(np.diff([s.area for s in slow]) > 0), [s.area for s in slow]
     assert np.all(np.diff(fast) < 0), fast
     x, y = raster.grid.mesh()
@@ -147,57 +147,72 @@ def test_safe_set_grows_as_a_slower_pursuer_approaches(arenas):
         assert not (s.mask & (r < 2 * d / 3 - 2 * H)).any()  # nothing of the pursuer's disk
 
 
-def test_only_the_ratio_of_speeds_shapes_the_set(arenas):
+def test_only_the_ratio_of_speeds_shapes_the_set(domains):
     """Doubling every speed halves every time and leaves S_e alone."""
-    arena, _ = arenas["triangle-10"]
+    travel_times, _ = domains["triangle-10"]
     e, ps = (5.0, 8.5), [(2.0, 2.0), (8.0, 1.0)]
-    slow = safe_set(arena, e, ps, evader_speed=1.0, pursuer_speeds=(0.5, 0.75))
-    fast = safe_set(arena, e, ps, evader_speed=2.0, pursuer_speeds=(1.0, 1.5))
+    slow = safe_set(travel_times, e, ps, evader_speed=1.0, pursuer_speeds=(0.5, 0.75))
+    fast = safe_set(travel_times, e, ps, evader_speed=2.0, pursuer_speeds=(1.0, 1.5))
     np.testing.assert_array_equal(slow.mask, fast.mask)
     np.testing.assert_allclose(fast.evader_time[fast.mask], slow.evader_time[slow.mask] / 2, rtol=1e-12)
     np.testing.assert_allclose(fast.pursuer_times, slow.pursuer_times / 2, rtol=1e-12)
     assert slow.mask.any() and not slow.mask.all()
 
 
-def test_evader_within_capture_radius_has_no_safe_set(arenas):
-    arena, _ = arenas["square-10"]
-    s = safe_set(arena, (5.0, 5.0), [(5.3, 5.2)], capture_radius=0.5)
+def test_evader_within_capture_radius_has_no_safe_set(domains):
+    travel_times, _ = domains["square-10"]
+    s = safe_set(travel_times, (5.0, 5.0), [(5.3, 5.2)], capture_radius=0.5)
     assert not s.mask.any() and s.area == 0.0
 
 
-def test_cached_fronts_give_the_same_sets_as_a_fresh_arena(arenas):
-    """The arena caches fronts by position at speed factor 1; every speed and
+def test_cached_fronts_give_the_same_sets_as_fresh_travel_times(domains):
+    """TravelTimes caches fronts by position at speed factor 1; every speed and
     radius must still give its own answer."""
-    arena, raster = arenas["triangle-10"]
+    travel_times, raster = domains["triangle-10"]
     e, ps = (5.0, 8.5), [(2.0, 2.0), (8.0, 1.0)]
     for speeds, radius in ((1.0, 0.5), ((1.5, 0.8), 0.5), (1.0, 0.0), ((1.5, 0.8), 0.3)):
-        cached = safe_set(arena, e, ps, pursuer_speeds=speeds, capture_radius=radius)
-        fresh = safe_set(FmmArena(raster.grid, raster.speed), e, ps, pursuer_speeds=speeds, capture_radius=radius)
+        cached = safe_set(travel_times, e, ps, pursuer_speeds=speeds, capture_radius=radius)
+        fresh = safe_set(TravelTimes(raster.grid, raster.speed), e, ps, pursuer_speeds=speeds, capture_radius=radius)
         np.testing.assert_array_equal(cached.mask, fresh.mask)
         np.testing.assert_array_equal(cached.pursuer_times, fresh.pursuer_times)
-    assert arena.travel_time((2.0, 2.0)) is arena.travel_time((2.0, 2.0))
+    assert travel_times.travel_time((2.0, 2.0)) is travel_times.travel_time((2.0, 2.0))
 
 
-def test_bad_inputs_name_the_culprit(arenas):
-    arena, _ = arenas["triangle-10"]
+def test_strategies_sharing_travel_times_share_fronts_and_the_safe_set(domains):
+    """The evader and the pursuers asking about one state build its safe set
+    once; a front and its time to capture are built once per position."""
+    travel_times, _ = domains["square-10"]
+    e, ps = (5.0, 5.0), [(1.0, 1.5), (8.5, 2.0)]
+    FarthestPointEvader(travel_times).heading(e, ps)
+    shared = safe_set(travel_times, e, ps)
+    assert FmmAreaPursuit(travel_times).area_gradient(e, ps).safe is shared
+    front = travel_times.front(np.array(ps[0]))
+    assert travel_times.front(np.array(ps[0])) is front
+    assert front.capture_time(0.5) is travel_times.capture_time(ps[0], 0.5)
+    np.testing.assert_array_equal(front.capture_time(0.0), front.times)  # capture on contact
+    assert front.source_speed == 1.0
+
+
+def test_bad_inputs_name_the_culprit(domains):
+    travel_times, _ = domains["triangle-10"]
     with pytest.raises(InputError, match="pursuer 2"):
-        safe_set(arena, (1.0, 1.0), [(9.0, 9.0), (5.0, 5.0)])  # inside the triangle
+        safe_set(travel_times, (1.0, 1.0), [(9.0, 9.0), (5.0, 5.0)])  # inside the triangle
     with pytest.raises(InputError, match="evader"):
-        safe_set(arena, (11.0, 1.0), [(9.0, 9.0)])
+        safe_set(travel_times, (11.0, 1.0), [(9.0, 9.0)])
     with pytest.raises(InputError, match="2 pursuer speeds for 1"):
-        safe_set(arena, (1.0, 1.0), [(9.0, 9.0)], pursuer_speeds=(1.0, 2.0))
+        safe_set(travel_times, (1.0, 1.0), [(9.0, 9.0)], pursuer_speeds=(1.0, 2.0))
     with pytest.raises(InputError, match="gradient"):
-        FmmAreaPursuit(arena, gradient="central")
+        FmmAreaPursuit(travel_times, gradient="central")
 
 
 # --------------------------------------------------------------------------- the area gradient
 
 
 @pytest.mark.parametrize("e, pursuers", SQUARE_CASES)
-def test_area_gradient_matches_lemma_3_in_the_square(arenas, e, pursuers):
-    arena, _ = arenas["square-10"]
-    boundary = FmmAreaPursuit(arena, capture_radius=0.0).area_gradient(e, pursuers)
-    finite = FmmAreaPursuit(arena, capture_radius=0.0, gradient="finite").area_gradient(e, pursuers)
+def test_area_gradient_matches_lemma_3_in_the_square(domains, e, pursuers):
+    travel_times, _ = domains["square-10"]
+    boundary = FmmAreaPursuit(travel_times, capture_radius=0.0).area_gradient(e, pursuers)
+    finite = FmmAreaPursuit(travel_times, capture_radius=0.0, gradient="finite").area_gradient(e, pursuers)
     for k in range(len(pursuers)):
         exact = exact_area_gradient(e, pursuers, k)
         if len(pursuers) == 1:
@@ -208,11 +223,11 @@ def test_area_gradient_matches_lemma_3_in_the_square(arenas, e, pursuers):
         assert angle_deg(finite.gradient[k], exact) < 10
 
 
-def test_area_gradient_of_a_faster_pursuer_matches_the_apollonius_disk(arenas):
-    arena, _ = arenas["square-10"]
+def test_area_gradient_of_a_faster_pursuer_matches_the_apollonius_disk(domains):
+    travel_times, _ = domains["square-10"]
     e, p, k = np.array([4.1, 6.2]), np.array([6.3, 4.9]), 0.5
     exact = -2 * math.pi * k * k * (e - p) / (1 - k * k) ** 2  # A = pi (k |e - p| / (1 - k^2))^2
-    g = FmmAreaPursuit(arena, pursuer_speeds=2.0, capture_radius=0.0).area_gradient(e, [p]).gradient[0]
+    g = FmmAreaPursuit(travel_times, pursuer_speeds=2.0, capture_radius=0.0).area_gradient(e, [p]).gradient[0]
     assert angle_deg(g, exact) < 3
     assert np.linalg.norm(g) == pytest.approx(np.linalg.norm(exact), rel=0.05)
 
@@ -227,7 +242,7 @@ OPEN_CASES = [
 ]
 
 
-def central_area_gradient(arena, e, pursuers, k, step=0.25):
+def central_area_gradient(travel_times, e, pursuers, k, step=0.25):
     """Differences of the node count over +-2.5 spacings: too coarse to steer
     by, but smooth enough to check a direction against."""
     g = np.zeros(2)
@@ -236,22 +251,22 @@ def central_area_gradient(arena, e, pursuers, k, step=0.25):
         for sign in (1, -1):
             q = np.array(pursuers, float)
             q[k, axis] += sign * step
-            areas.append(safe_set(arena, e, q).area)
+            areas.append(safe_set(travel_times, e, q).area)
         g[axis] = (areas[0] - areas[1]) / (2 * step)
     return g
 
 
 @pytest.mark.parametrize("name, e, pursuers", OPEN_CASES)
-def test_boundary_and_finite_gradients_agree_in_open_configurations(arenas, name, e, pursuers):
-    arena, _ = arenas[name]
-    boundary = FmmAreaPursuit(arena).area_gradient(e, pursuers)
-    finite = FmmAreaPursuit(arena, gradient="finite").area_gradient(e, pursuers)
+def test_boundary_and_finite_gradients_agree_in_open_configurations(domains, name, e, pursuers):
+    travel_times, _ = domains[name]
+    boundary = FmmAreaPursuit(travel_times).area_gradient(e, pursuers)
+    finite = FmmAreaPursuit(travel_times, gradient="finite").area_gradient(e, pursuers)
     np.testing.assert_array_equal(boundary.active, finite.active)
     assert boundary.active.all()
     for k in range(len(pursuers)):
         a, b = boundary.gradient[k], finite.gradient[k]
         assert a @ b / (np.linalg.norm(a) * np.linalg.norm(b)) > 0.9, (k, a, b)
-        assert angle_deg(a, central_area_gradient(arena, e, pursuers, k)) < 5
+        assert angle_deg(a, central_area_gradient(travel_times, e, pursuers, k)) < 5
 
 
 @pytest.mark.parametrize(
@@ -264,24 +279,24 @@ def test_boundary_and_finite_gradients_agree_in_open_configurations(arenas, name
         ((8.0, 1.0), [(5.0, 2.0)]),
     ],
 )
-def test_boundary_gradient_in_the_maze_follows_the_area(arenas, e, pursuers):
+def test_boundary_gradient_in_the_maze_follows_the_area(domains, e, pursuers):
     """The capture disk reaches through the maze's half-metre walls, so parts
     of S_e end on a wall face where psi^c jumps: those stay put as a pursuer
     moves and must not count (there |grad f| from the geometry is meaningless)."""
-    arena, _ = arenas["maze-10"]
-    ag = FmmAreaPursuit(arena).area_gradient(e, pursuers)
+    travel_times, _ = domains["maze-10"]
+    ag = FmmAreaPursuit(travel_times).area_gradient(e, pursuers)
     for k in range(len(pursuers)):
         assert ag.active[k]
-        assert angle_deg(ag.gradient[k], central_area_gradient(arena, e, pursuers, k, step=0.15)) < 8
+        assert angle_deg(ag.gradient[k], central_area_gradient(travel_times, e, pursuers, k, step=0.15)) < 8
 
 
-def test_pursuer_without_an_active_boundary_has_no_gradient_and_pursues(arenas):
-    arena, _ = arenas["square-10"]
+def test_pursuer_without_an_active_boundary_has_no_gradient_and_pursues(domains):
+    travel_times, _ = domains["square-10"]
     e, ps = (5.0, 5.0), [(3.0, 5.0), (1.0, 5.0)]  # the second hides behind the first
-    ag = FmmAreaPursuit(arena).area_gradient(e, ps)
+    ag = FmmAreaPursuit(travel_times).area_gradient(e, ps)
     assert ag.active.tolist() == [True, False]
     assert ag.boundary_length[1] == 0 and not ag.gradient[1].any()
-    np.testing.assert_allclose(FmmAreaPursuit(arena).headings(e, ps)[1], [1.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(FmmAreaPursuit(travel_times).headings(e, ps)[1], [1.0, 0.0], atol=1e-9)
 
 
 # --------------------------------------------------------------------------- headings
@@ -316,10 +331,14 @@ def placements(raster, n, rng):
 
 
 @pytest.mark.parametrize("name", ["triangle-10", "maze-10"])
-def test_headings_never_point_into_obstacles(arenas, name):
-    arena, raster = arenas[name]
+def test_headings_never_point_into_obstacles(domains, name):
+    travel_times, raster = domains[name]
     rng = np.random.default_rng(7)
-    strategies = [FmmAreaPursuit(arena), FmmAreaPursuit(arena, gradient="finite"), GeodesicPursuit(arena)]
+    strategies = [
+        FmmAreaPursuit(travel_times),
+        FmmAreaPursuit(travel_times, gradient="finite"),
+        GeodesicPursuit(travel_times),
+    ]
     checked = 0
     for _trial in range(24):
         pts = placements(raster, 3, rng)
@@ -330,34 +349,34 @@ def test_headings_never_point_into_obstacles(arenas, name):
             for p, d in zip(ps, strategy.headings(e, ps)):
                 assert_clear(raster, p, d)
                 checked += 1
-        assert_clear(raster, e, FarthestPointEvader(arena).heading(e, ps))
+        assert_clear(raster, e, FarthestPointEvader(travel_times).heading(e, ps))
     assert checked > 30
 
 
-def test_area_heading_into_an_obstacle_slides_along_it(arenas):
+def test_area_heading_into_an_obstacle_slides_along_it(domains):
     """At the triangle's lower left corner, with the evader below, -dA/dx_p
     points into the triangle; the heading turns along its face and still lowers the area."""
-    arena, raster = arenas["triangle-10"]
+    travel_times, raster = domains["triangle-10"]
     e, p = (5.0, 1.0), np.array([3.0, 3.6])
-    g = FmmAreaPursuit(arena).area_gradient(e, [p]).gradient[0]
+    g = FmmAreaPursuit(travel_times).area_gradient(e, [p]).gradient[0]
     raw = -g / np.linalg.norm(g)
     with pytest.raises(AssertionError):
         assert_clear(raster, p, raw)
-    d = FmmAreaPursuit(arena).headings(e, [p])[0]
+    d = FmmAreaPursuit(travel_times).headings(e, [p])[0]
     assert_clear(raster, p, d)
     assert 10 < angle_deg(d, raw) < 85
 
 
-def test_geodesic_pursuit_goes_around_the_triangle(arenas):
-    arena, raster = arenas["triangle-10"]
+def test_geodesic_pursuit_goes_around_the_triangle(domains):
+    travel_times, raster = domains["triangle-10"]
     e, p = np.array([5.0, 8.5]), np.array([4.5, 2.0])  # the straight line runs through the triangle
     corner = np.array([3.0, 3.5])
-    d = GeodesicPursuit(arena).headings(e, [p])[0]
+    d = GeodesicPursuit(travel_times).headings(e, [p])[0]
     assert angle_deg(d, corner - p) < 10
     length, path = 0.0, [p.copy()]
     step = 0.05
     while np.linalg.norm(p - e) > 0.5 and length < 20:
-        p = p + step * GeodesicPursuit(arena).headings(e, [p])[0]
+        p = p + step * GeodesicPursuit(travel_times).headings(e, [p])[0]
         length += step
         path.append(p.copy())
         assert raster.free[raster.grid.nearest_index(p)]
@@ -369,14 +388,14 @@ def test_geodesic_pursuit_goes_around_the_triangle(arenas):
 # --------------------------------------------------------------------------- the evader
 
 
-def test_farthest_point_evader_holds_its_target_then_retargets(arenas):
-    arena, _ = arenas["square-10"]
+def test_farthest_point_evader_holds_its_target_then_retargets(domains):
+    travel_times, _ = domains["square-10"]
     e, ps = np.array([6.0, 4.0]), np.array([[2.0, 2.0], [3.0, 8.0]])
-    evader = FarthestPointEvader(arena)
+    evader = FarthestPointEvader(travel_times)
     d = evader.heading(e, ps)
-    s = safe_set(arena, e, ps)
+    s = safe_set(travel_times, e, ps)
     far = np.unravel_index(np.argmax(np.where(s.mask, s.evader_time, -np.inf)), s.mask.shape)
-    np.testing.assert_allclose(evader.target, arena.grid.point(far))
+    np.testing.assert_allclose(evader.target, travel_times.grid.point(far))
     assert s.evader_time[far] == s.evader_time[s.mask].max()
     assert angle_deg(d, evader.target - e) < 3  # in the open the geodesic is the straight line
     first = evader.target.copy()
@@ -389,20 +408,20 @@ def test_farthest_point_evader_holds_its_target_then_retargets(arenas):
     near = first - 0.2 * (first - e) / np.linalg.norm(first - e)  # within r_c / 2 = 0.25
     evader.heading(near, ps)
     assert evader.retargets == 2
-    s = safe_set(arena, near, ps)
-    assert s.mask[arena.grid.nearest_index(evader.target)]
+    s = safe_set(travel_times, near, ps)
+    assert s.mask[travel_times.grid.nearest_index(evader.target)]
     assert np.linalg.norm(evader.target - first) > 2.0
-    assert s.evader_time[arena.grid.nearest_index(evader.target)] == s.evader_time[s.mask].max()
+    assert s.evader_time[travel_times.grid.nearest_index(evader.target)] == s.evader_time[s.mask].max()
 
 
-def test_area_pursuit_captures_the_farthest_point_evader_sooner_than_pure_pursuit(arenas):
+def test_area_pursuit_captures_the_farthest_point_evader_sooner_than_pure_pursuit(domains):
     """Thesis 5.3.2, Fig. 5.7: two pursuers starting side by side spread out
     and herd the evader under the area strategy; under pure pursuit they
     chase it round the square together."""
-    arena, _ = arenas["square-10"]
+    travel_times, _ = domains["square-10"]
 
     def play(strategy):
-        evader = FarthestPointEvader(arena)
+        evader = FarthestPointEvader(travel_times)
         e, ps = np.array([5.0, 5.0]), np.array([[1.0, 1.5], [1.5, 1.0]])
         dt = 0.1
         for step in range(400):
@@ -413,5 +432,5 @@ def test_area_pursuit_captures_the_farthest_point_evader_sooner_than_pure_pursui
                 return (step + 1) * dt
         return math.inf
 
-    area, pure = play(FmmAreaPursuit(arena)), play(GeodesicPursuit(arena))
+    area, pure = play(FmmAreaPursuit(travel_times)), play(GeodesicPursuit(travel_times))
     assert area < 20 and area < 0.75 * pure

@@ -69,6 +69,19 @@ def test_an_evader_that_keeps_its_distance_is_never_caught_and_the_clock_stops_a
     assert np.allclose(np.hypot(*(chase.evader - chase.pursuers[:, 0]).T), 4.0)
 
 
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        (dict(dt=0.0), "dt must be a positive finite number"),
+        (dict(max_time=float("inf")), "max_time must be a positive finite number"),
+        (dict(capture_radius=-0.5), "capture radius must be a finite number >= 0"),
+    ],
+)
+def test_bad_numbers_are_named(change, message):
+    with pytest.raises(InputError, match=message):
+        pursue(Toward(), Away((1, 0)), (5, 5), [(1, 5)], passable=open_field, **change)
+
+
 def test_bad_starts_and_bad_headings_are_named():
     with pytest.raises(InputError, match="pursuer 1 starts at"):
         pursue(Toward(), Away((1, 0)), (5, 5), [(11, 5)], passable=open_field)

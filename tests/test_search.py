@@ -241,6 +241,26 @@ def test_possible_defender_refuses_bad_steps():
         pd.advance(1.0, 1.0, np.zeros((3, 3), dtype=bool))
 
 
+@pytest.mark.parametrize(
+    "call, message",
+    [
+        (lambda grid, free: visibility(free, grid, (5.0, 5.0), max_range=-1.0), "max_range must be a number >= 0"),
+        (lambda grid, free: visibility(free, grid, (5.0, 5.0), max_range="far"), "max_range must be a number >= 0"),
+        (lambda grid, free: Weights(uav="100"), "weight uav must be a finite number >= 0, got '100'"),
+        (lambda grid, free: lawnmower((0, 0, 10, 10), 0.0), "footprint radius must be a positive finite number"),
+    ],
+)
+def test_number_checks_name_the_argument(call, message):
+    grid, free = field()
+    with pytest.raises(InputError, match=message):
+        call(grid, free)
+
+
+def test_visibility_without_a_range_limit_sees_as_far_as_the_walls():
+    grid, free = field()
+    assert np.array_equal(visibility(free, grid, (5.0, 5.0)), visibility(free, grid, (5.0, 5.0), max_range=1e9))
+
+
 # --------------------------------------------------------------------------- the target
 
 
