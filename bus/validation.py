@@ -41,10 +41,10 @@ def convert(data: Any, kind: Any, *, at: str = "") -> Any:
     try:
         return msgspec.convert(data, kind)
     except msgspec.ValidationError as error:
-        raise explain(error, kind, data, at) from None
+        raise _explain(error, kind, data, at) from None
 
 
-def explain(error: msgspec.ValidationError, kind: Any, data: Any, at: str = "") -> Invalid:
+def _explain(error: msgspec.ValidationError, kind: Any, data: Any, at: str = "") -> Invalid:
     """The ``Invalid`` that ``error``, raised converting ``data`` to ``kind``, means."""
     parts = _WHERE.match(str(error))
     message = parts["message"]
@@ -57,19 +57,20 @@ def explain(error: msgspec.ValidationError, kind: Any, data: Any, at: str = "") 
     if named and message.startswith("Object missing required field"):
         field, _ = _resolve(node, [named[1]], value)
         return Invalid(_path(at, [*steps, named[1]]), f"must be given, as {describe(field)}")
-    return Invalid(_path(at, steps), problem(node, value))
+    return Invalid(_path(at, steps), _problem(node, value))
 
 
-def problem(node: Any, value: Any) -> str:
+def _problem(node: Any, value: Any) -> str:
     """What is wrong with ``value`` for the type ``node`` (a ``msgspec.inspect`` type)."""
     choices = _choices(node)
     if choices is not None:
         return not_one_of(value, choices)
-    return f"must be {describe(node)}, got {shown(value)}"
+    return f"must be {describe(node)}, got {_shown(value)}"
 
 
 def not_one_of(value: Any, choices) -> str:
-    return f"{shown(value)} is not one of {', '.join(repr(c) for c in choices)}"
+    """The problem of a ``value`` that is none of ``choices``, for checks msgspec cannot make."""
+    return f"{_shown(value)} is not one of {', '.join(repr(c) for c in choices)}"
 
 
 def describe(node: Any) -> str:
@@ -108,7 +109,7 @@ def describe(node: Any) -> str:
     return type(node).__name__.removesuffix("Type").lower()
 
 
-def shown(value: Any) -> str:
+def _shown(value: Any) -> str:
     """``value`` as a message quotes it: TOML's ``true``, at most a line's worth."""
     text = ("true" if value else "false") if isinstance(value, bool) else repr(value)
     return text if len(text) <= _SHOWN else text[: _SHOWN - 3] + "..."
@@ -144,13 +145,10 @@ def _choices(node) -> tuple | None:
 def _resolve(node, steps, data) -> tuple[Any, Any]:
     """The type and the value found at ``steps`` (field names and indices) down ``node`` and ``data``."""
     for step in steps:
-        node = _bare(node)
-        members = _tagged(node)
+        members = _tagged(_bare(node))
         if members and step == members[0].tag_field:
             return mi.LiteralType(tuple(m.tag for m in members)), _item(data, step)
-        if members:
-            tag = data.get(members[0].tag_field) if isinstance(data, dict) else None
-            node = next((m for m in members if m.tag == tag), members[0])
+        node = _chosen(node, data)
         if isinstance(node, mi.StructType):
             node = next((f.type for f in node.fields if f.encode_name == step), mi.AnyType())
         elif isinstance(node, mi.TupleType):
@@ -174,6 +172,16 @@ def _bare(node):
     return node
 
 
+def _chosen(node, data):
+    """``node`` bare, and of a tagged union the Struct whose tag ``data`` gives (else the first)."""
+    node = _bare(node)
+    members = _tagged(node)
+    if not members:
+        return node
+    tag = data.get(members[0].tag_field) if isinstance(data, dict) else None
+    return next((m for m in members if m.tag == tag), members[0])
+
+
 def _tagged(node) -> list:
     """The Structs of a tagged union, or none."""
     if isinstance(node, mi.UnionType) and all(isinstance(t, mi.StructType) and t.tag_field for t in node.types):
@@ -182,11 +190,7 @@ def _tagged(node) -> list:
 
 
 def _keys(node, value) -> list[str]:
-    node = _bare(node)
-    members = _tagged(node)
-    if members:
-        tag = value.get(members[0].tag_field) if isinstance(value, dict) else None
-        node = next((m for m in members if m.tag == tag), members[0])
+    node = _chosen(node, value)
     if not isinstance(node, mi.StructType):
         return []
     return ([node.tag_field] if node.tag_field else []) + [f.encode_name for f in node.fields]

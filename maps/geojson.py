@@ -34,7 +34,7 @@ DISK_SEGMENTS = 32
 """Segments per quarter circle of a region drawn as a point and radius (area error below 0.05 %)."""
 
 Label = Annotated[str, Meta(min_length=1)]
-Width = Annotated[float, Meta(gt=0.0, le=10000.0, extra={"unit": "m"})]
+Length = Annotated[float, Meta(gt=0.0, le=10000.0, extra={"unit": "m"})]
 
 
 class _Properties(msgspec.Struct, frozen=True, tag_field="kind"):
@@ -52,14 +52,14 @@ class ObstacleProperties(_Properties, tag="obstacle"):
 class ZoneProperties(_Properties, tag="zone", kw_only=True):
     speed: SpeedFactor
     name: Label | None = None
-    width: Width | None = None  # lines only
+    width: Length | None = None  # lines only
 
 
 class RegionProperties(_Properties, tag="region", kw_only=True):
     name: Label
     role: Literal[ROLES]
     team: Label | None = None
-    radius: Width | None = None  # points only
+    radius: Length | None = None  # points only
 
 
 Properties = AreaProperties | ObstacleProperties | ZoneProperties | RegionProperties
@@ -260,7 +260,7 @@ def _feature(feature, where: str, units: str):
 
     def given(key, shape):
         if getattr(props, key) is None:
-            raise MapError(f"{label}: property {key!r}: must be given for a {shape}, as {describe(Width)}")
+            raise MapError(f"{label}: property {key!r}: must be given for a {shape}, as {describe(Length)}")
 
     if kind == "area":
         shapes(Polygon)
