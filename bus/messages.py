@@ -18,7 +18,7 @@ from bearcat.bus.keys import NAME_PATTERN
 
 SCHEMA_VERSION = 1
 
-Name = Annotated[str, msgspec.Meta(pattern=NAME_PATTERN)]
+Name = Annotated[str, msgspec.Meta(pattern=NAME_PATTERN, description="1 to 64 letters, digits, '-' or '_'")]
 Latitude = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
 Longitude = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
 Heading = Annotated[float, msgspec.Meta(ge=0.0, lt=360.0)]

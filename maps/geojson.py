@@ -11,24 +11,59 @@ import json
 import logging
 import math
 from pathlib import Path
+from typing import Annotated, Literal, get_args
 
+import msgspec
 import numpy as np
 import shapely
+from msgspec import Meta
 from shapely.geometry import LineString, MultiLineString, MultiPolygon, Point, Polygon, mapping, shape
 from shapely.geometry.polygon import orient
 
+from bearcat.bus.validation import Invalid, convert, describe
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
-from bearcat.maps.model import ROLES, Map, Region, Zone, check_origin, check_polygonal, check_speed
+from bearcat.maps.model import ROLES, Map, Region, SpeedFactor, Zone, check_origin, check_polygonal
 
 log = logging.getLogger(__name__)
 
 UNITS = ("degrees", "metres")
-KINDS = ("area", "obstacle", "zone", "region")
 POLYGONAL = (Polygon, MultiPolygon)
 MAX_EXTENT_DEGREES = 0.5
 DISK_SEGMENTS = 32
 """Segments per quarter circle of a region drawn as a point and radius (area error below 0.05 %)."""
+
+Label = Annotated[str, Meta(min_length=1)]
+Length = Annotated[float, Meta(gt=0.0, le=10000.0, extra={"unit": "m"})]
+
+
+class _Properties(msgspec.Struct, frozen=True, tag_field="kind"):
+    """A feature's ``properties``, by its ``kind``; others (styling from GIS tools) are ignored."""
+
+
+class AreaProperties(_Properties, tag="area"):
+    speed: SpeedFactor = 1.0
+
+
+class ObstacleProperties(_Properties, tag="obstacle"):
+    name: Label | None = None
+
+
+class ZoneProperties(_Properties, tag="zone", kw_only=True):
+    speed: SpeedFactor
+    name: Label | None = None
+    width: Length | None = None  # lines only
+
+
+class RegionProperties(_Properties, tag="region", kw_only=True):
+    name: Label
+    role: Literal[ROLES]
+    team: Label | None = None
+    radius: Length | None = None  # points only
+
+
+Properties = AreaProperties | ObstacleProperties | ZoneProperties | RegionProperties
+KINDS = tuple(kind.__struct_config__.tag for kind in get_args(Properties))
 
 
 def read_geojson(path) -> Map:
@@ -104,6 +139,8 @@ def parse_geojson(text: str, source: str, default_name: str) -> Map:
     except json.JSONDecodeError as exc:
         where = f"line {exc.lineno}, column {exc.colno}"
         raise MapError(f"{source} is not valid JSON ({exc.msg} at {where})") from None
+    except RecursionError:
+        raise MapError(f"{source} nests arrays or objects too deeply to be a map") from None
     if not isinstance(document, dict) or document.get("type") != "FeatureCollection":
         raise MapError(f"{source} is not a GeoJSON FeatureCollection")
     features = document.get("features")
@@ -150,21 +187,21 @@ def _parts(parsed) -> dict:
     for kind, label, geometry, props in parsed:
         try:
             if kind == "area":
-                parts["area"], parts["area_speed"] = geometry, props["speed"]
+                parts["area"], parts["area_speed"] = geometry, props.speed
             elif kind == "obstacle":
                 pieces = geometry.geoms if isinstance(geometry, MultiPolygon) else [geometry]
                 parts["obstacles"] += pieces
-                parts["obstacle_names"] += [props["name"]] * len(pieces)
+                parts["obstacle_names"] += [props.name] * len(pieces)
             elif kind == "zone":
-                if "width" in props:
-                    geometry = geometry.buffer(props["width"] / 2, cap_style="flat")
-                parts["zones"].append(Zone(props["name"], geometry, props["speed"]))
+                if isinstance(geometry, LineString | MultiLineString):
+                    geometry = geometry.buffer(props.width / 2, cap_style="flat")
+                parts["zones"].append(Zone(props.name, geometry, props.speed))
             else:
-                if "radius" in props:
-                    geometry = geometry.buffer(props["radius"], quad_segs=DISK_SEGMENTS)
-                if props["name"] in parts["regions"]:
-                    raise MapError(f"property 'name' repeats region name {props['name']!r}")
-                parts["regions"][props["name"]] = Region(props["name"], props["role"], geometry, props["team"])
+                if isinstance(geometry, Point):
+                    geometry = geometry.buffer(props.radius, quad_segs=DISK_SEGMENTS)
+                if props.name in parts["regions"]:
+                    raise MapError(f"property 'name' repeats region name {props.name!r}")
+                parts["regions"][props.name] = Region(props.name, props.role, geometry, props.team)
         except MapError as exc:
             raise MapError(f"{label}: {exc}") from None
     return parts
@@ -203,28 +240,16 @@ def _feature(feature, where: str, units: str):
     """``(kind, label, geometry, properties)`` with geometry in the file's units and checked properties."""
     if not isinstance(feature, dict) or feature.get("type") != "Feature":
         raise MapError(f"{where} is not a GeoJSON Feature")
-    props = feature.get("properties")
-    if not isinstance(props, dict):
+    raw = feature.get("properties")
+    if not isinstance(raw, dict):
         raise MapError(f"{where} has no properties object")
-    kind = props.get("kind")
-    if kind not in KINDS:
-        raise MapError(f"{where}: property 'kind' must be one of {', '.join(KINDS)}, got {kind!r}")
-    label = f"{where} ({kind})"
+    kind = raw.get("kind")
+    label = f"{where} ({kind})" if kind in KINDS else where
+    try:
+        props = convert(raw, Properties)
+    except Invalid as exc:
+        raise MapError(f"{label}: property {exc.path!r}: {exc.problem}") from None
     geometry = _geometry(feature.get("geometry"), label, units)
-
-    def text(key, required=False):
-        value = props.get(key)
-        if value is None and not required:
-            return None
-        if not isinstance(value, str) or not value:
-            raise MapError(f"{label}: property {key!r} must be a non-empty string, got {value!r}")
-        return value
-
-    def positive(key):
-        value = props.get(key)
-        if not _is_number(value) or value <= 0:
-            raise MapError(f"{label}: property {key!r} must be a number above zero (metres), got {value!r}")
-        return float(value)
 
     def shapes(*allowed):
         if not isinstance(geometry, allowed):
@@ -233,32 +258,24 @@ def _feature(feature, where: str, units: str):
         if isinstance(geometry, POLYGONAL):
             check_polygonal(geometry, f"{label}: geometry")
 
-    checked = {}
+    def given(key, shape):
+        if getattr(props, key) is None:
+            raise MapError(f"{label}: property {key!r}: must be given for a {shape}, as {describe(Length)}")
+
     if kind == "area":
         shapes(Polygon)
-        checked["speed"] = check_speed(props.get("speed", 1.0), f"{label}: property 'speed'")
     elif kind == "obstacle":
         shapes(*POLYGONAL)
-        checked["name"] = text("name")
     elif kind == "zone":
-        checked["speed"] = check_speed(props.get("speed"), f"{label}: property 'speed'")
-        checked["name"] = text("name")
-        if isinstance(geometry, (LineString, MultiLineString)):
-            checked["width"] = positive("width")
+        if isinstance(geometry, LineString | MultiLineString):
+            given("width", geometry.geom_type)
         else:
             shapes(*POLYGONAL, LineString, MultiLineString)
+    elif isinstance(geometry, Point):
+        given("radius", "Point")
     else:
-        checked["name"] = text("name", required=True)
-        role = props.get("role")
-        if role not in ROLES:
-            raise MapError(f"{label}: property 'role' must be one of {', '.join(ROLES)}, got {role!r}")
-        checked["role"] = role
-        checked["team"] = text("team")
-        if isinstance(geometry, Point):
-            checked["radius"] = positive("radius")
-        else:
-            shapes(*POLYGONAL, Point)
-    return kind, label, geometry, checked
+        shapes(*POLYGONAL, Point)
+    return kind, label, geometry, props
 
 
 def _geometry(raw, label: str, units: str):

@@ -10,21 +10,28 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
+from typing import Annotated
 
 import shapely
+from msgspec import Meta
 from shapely.geometry import MultiPolygon, Point, Polygon
 
+from bearcat.bus.validation import Invalid, convert
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
 
 ROLES = ("flag", "return", "target", "side")
 
+SpeedFactor = Annotated[float, Meta(gt=0.0, le=1.0)]
+"""Zero would be an obstacle, and nothing is faster than full speed."""
+
 
 def check_speed(value, what: str) -> float:
-    """A speed factor in (0, 1]; zero would be an obstacle, and nothing is faster than full speed."""
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not 0 < value <= 1:
-        raise MapError(f"{what} must be a number in (0, 1], got {value!r}")
-    return float(value)
+    """``value`` as a speed factor, else a MapError naming ``what``."""
+    try:
+        return convert(value, SpeedFactor)
+    except Invalid as exc:
+        raise MapError(f"{what} {exc.problem}") from None
 
 
 def check_origin(origin) -> tuple[float, float]:

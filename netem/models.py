@@ -15,10 +15,22 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Annotated
 
+import msgspec
 import numpy as np
+from msgspec import Meta
 
 DISTRIBUTIONS = ("constant", "uniform", "normal", "pareto", "lognormal")
+
+# Bounds of the models a profile file gives as tables (netem/profiles.py reads them).
+Probability = Annotated[float, Meta(ge=0.0, le=1.0, description="a probability in [0, 1]")]
+Metres = Annotated[float, Meta(ge=0.0, le=1000.0, extra={"unit": "m"})]
+ErrorDegrees = Annotated[float, Meta(ge=0.0, le=180.0, extra={"unit": "degrees"})]
+
+
+class _Table(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A model given as a TOML table: its keys are exactly the fields."""
 
 
 @dataclass(frozen=True)
@@ -49,18 +61,17 @@ class Delay:
         return max(0.0, self.base + float(extra))
 
 
-@dataclass(frozen=True)
-class GilbertElliott:
+class GilbertElliott(_Table):
     """Two-state burst loss: a good state losing ``loss_good`` of packets and
     a bad one losing ``loss_bad``; each packet moves good -> bad with ``p``
     and bad -> good with ``r`` (``tc netem loss gemodel p r 1-h 1-k``).
     Mean burst length ``1 / r``; stationary loss
     ``(r loss_good + p loss_bad) / (p + r)``."""
 
-    p: float
-    r: float
-    loss_good: float = 0.0
-    loss_bad: float = 1.0
+    p: Probability
+    r: Probability
+    loss_good: Probability = 0.0
+    loss_bad: Probability = 1.0
 
     @property
     def stationary_loss(self) -> float:
@@ -111,8 +122,7 @@ class LinkModel:
         return self == LinkModel(retransmit=self.retransmit)
 
 
-@dataclass(frozen=True)
-class GpsError:
+class GpsError(_Table):
     """Phone GPS error in metres (east, north).
 
     A bias per axis following a first-order Gauss-Markov process with
@@ -121,13 +131,13 @@ class GpsError:
     ``urban_distance`` of a building (multipath, blocked sky). A fix is not
     produced with probability ``dropout`` (``urban_dropout`` near buildings)."""
 
-    bias_sigma: float = 0.0
-    tau: float = 60.0
-    noise_sigma: float = 0.0
-    urban_factor: float = 1.0
-    urban_distance: float = 0.0
-    dropout: float = 0.0
-    urban_dropout: float = 0.0
+    bias_sigma: Metres = 0.0
+    tau: Annotated[float, Meta(gt=0.0, le=86400.0, extra={"unit": "s"})] = 60.0
+    noise_sigma: Metres = 0.0
+    urban_factor: Annotated[float, Meta(ge=0.0, le=100.0)] = 1.0
+    urban_distance: Metres = 0.0
+    dropout: Probability = 0.0
+    urban_dropout: Probability = 0.0
 
     def horizontal_sigma(self, urban: bool = False) -> float:
         """Standard deviation of the error per axis at steady state."""
@@ -135,12 +145,11 @@ class GpsError:
         return s * (self.urban_factor if urban else 1.0)
 
 
-@dataclass(frozen=True)
-class CompassError:
+class CompassError(_Table):
     """Phone compass error in degrees: a bias drawn once per phone and white noise."""
 
-    bias_sigma: float = 0.0
-    noise_sigma: float = 0.0
+    bias_sigma: ErrorDegrees = 0.0
+    noise_sigma: ErrorDegrees = 0.0
 
 
 class GpsTrack:

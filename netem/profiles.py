@@ -1,15 +1,31 @@
 """Named impairment profiles, read from ``profiles.toml`` beside this module
-(or any file of the same form); errors name the file, the profile and the key."""
+(or any file of the same form). The tables below and the models' own
+Structs are the file's schema, bounds and defaults; errors are one sentence
+naming the file, the profile and the key, such as
+``p.toml: 3g.link.loss: must be a probability in [0, 1], got 1.5``."""
 
 from __future__ import annotations
 
-import math
 import tomllib
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Annotated, Literal
 
-from bearcat.netem.models import DISTRIBUTIONS, CompassError, Delay, GilbertElliott, GpsError, LinkModel, Outage
+import msgspec
+from msgspec import Meta
+
+from bearcat.bus.validation import Invalid, convert
+from bearcat.netem.models import (
+    DISTRIBUTIONS,
+    CompassError,
+    Delay,
+    GilbertElliott,
+    GpsError,
+    LinkModel,
+    Outage,
+    Probability,
+)
 
 
 class ProfileError(ValueError):
@@ -19,28 +35,42 @@ class ProfileError(ValueError):
 @dataclass(frozen=True)
 class Profile:
     name: str
+    description: str
+    sources: tuple[str, ...]
+    link: LinkModel
+    gps: GpsError
+    compass: CompassError
+
+
+Lag = Annotated[float, Meta(ge=0.0, le=60.0, extra={"unit": "s"})]
+GameTime = Annotated[float, Meta(ge=0.0, le=86400.0, extra={"unit": "s"})]
+
+
+class LinkTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """``[NAME.link]``: a ``LinkModel`` written flat, its defaults the model's."""
+
+    delay: Lag = Delay.base
+    jitter: Lag = Delay.jitter
+    distribution: Literal[DISTRIBUTIONS] = Delay.distribution
+    loss: Probability = LinkModel.loss
+    burst: GilbertElliott | None = LinkModel.burst
+    duplicate: Probability = LinkModel.duplicate
+    reorder: Probability = LinkModel.reorder
+    rate: Annotated[float, Meta(ge=0.0, le=1e12, extra={"unit": "bytes/s"})] = LinkModel.rate
+    idle_after: Annotated[float, Meta(ge=0.0, le=3600.0, extra={"unit": "s"})] = LinkModel.idle_after
+    promotion: Annotated[tuple[Lag, Lag], Meta(description="[shortest, longest] in seconds")] = LinkModel.promotion
+    outages: tuple[Annotated[tuple[GameTime, GameTime], Meta(description="[start, end] in seconds")], ...] = ()
+    retransmit: Annotated[float, Meta(gt=0.0, le=60.0, extra={"unit": "s"})] = LinkModel.retransmit
+
+
+class ProfileTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """``[NAME]`` with its ``[NAME.link]``, ``[NAME.gps]`` and ``[NAME.compass]``."""
+
     description: str = ""
     sources: tuple[str, ...] = ()
-    link: LinkModel = field(default_factory=LinkModel)
-    gps: GpsError = field(default_factory=GpsError)
-    compass: CompassError = field(default_factory=CompassError)
-
-
-_LINK_KEYS = {
-    "delay",
-    "jitter",
-    "distribution",
-    "loss",
-    "burst",
-    "duplicate",
-    "reorder",
-    "rate",
-    "idle_after",
-    "promotion",
-    "outages",
-    "retransmit",
-}
-_PROBABILITIES = {"loss", "duplicate", "reorder", "dropout", "urban_dropout"}
+    link: LinkTable = LinkTable()
+    gps: GpsError = GpsError()
+    compass: CompassError = CompassError()
 
 
 def builtin_path():
@@ -54,9 +84,23 @@ def load_profiles(path: str | Path | None = None) -> dict[str, Profile]:
         data = tomllib.loads(source.read_text(encoding="utf-8"))
     except FileNotFoundError:
         raise ProfileError(f"there is no profile file {where}") from None
+    except UnicodeDecodeError:
+        raise ProfileError(f"{where} is not UTF-8 text") from None
+    except OSError as exc:
+        raise ProfileError(f"{where} cannot be read: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ProfileError(f"{where} is not valid TOML: {exc}") from None
-    return {name: _profile(name, table, where) for name, table in data.items()}
+    except RecursionError:
+        raise ProfileError(f"{where} nests arrays or tables too deeply to be a profile file") from None
+    profiles = {}
+    for name, table in data.items():
+        try:
+            given = convert(table, ProfileTable, at=name)
+            link = _link_model(given.link, f"{name}.link")
+        except Invalid as exc:
+            raise ProfileError(f"{where}: {exc}") from None
+        profiles[name] = Profile(name, given.description, given.sources, link, given.gps, given.compass)
+    return profiles
 
 
 def load_profile(name: str, path: str | Path | None = None) -> Profile:
@@ -66,74 +110,23 @@ def load_profile(name: str, path: str | Path | None = None) -> Profile:
     return profiles[name]
 
 
-def _profile(name: str, table, where: str) -> Profile:
-    at = f"{where} [{name}]"
-    if not isinstance(table, dict):
-        raise ProfileError(f"{at} must be a table")
-    _only(table, {"description", "sources", "link", "gps", "compass"}, at)
-    link = table.get("link", {})
-    _only(link, _LINK_KEYS, f"{at}.link")
-    burst = link.get("burst")
-    if burst is not None:
-        _only(burst, {"p", "r", "loss_good", "loss_bad"}, f"{at}.link.burst")
-        burst = GilbertElliott(**{k: _number(v, f"{at}.link.burst.{k}", probability=True) for k, v in burst.items()})
-    distribution = link.get("distribution", "normal")
-    if distribution not in DISTRIBUTIONS:
-        raise ProfileError(f"{at}.link.distribution is {distribution!r}, not one of {', '.join(DISTRIBUTIONS)}")
-    promotion = link.get("promotion", [0.0, 0.0])
-    if not (isinstance(promotion, list) and len(promotion) == 2):
-        raise ProfileError(f"{at}.link.promotion must be [shortest, longest] in seconds")
-    lo, hi = (_number(v, f"{at}.link.promotion") for v in promotion)
-    if hi < lo:
-        raise ProfileError(f"{at}.link.promotion has its longest below its shortest")
-    outages = []
-    for k, window in enumerate(link.get("outages", [])):
-        if not (isinstance(window, list) and len(window) == 2):
-            raise ProfileError(f"{at}.link.outages[{k}] must be [start, end] in seconds")
-        start, end = (_number(v, f"{at}.link.outages[{k}]") for v in window)
-        outages.append(Outage(start, end))
-    numbers = {
-        k: _number(link[k], f"{at}.link.{k}", probability=k in _PROBABILITIES)
-        for k in ("loss", "duplicate", "reorder", "rate", "idle_after", "retransmit")
-        if k in link
-    }
-    model = LinkModel(
-        delay=Delay(
-            _number(link.get("delay", 0.0), f"{at}.link.delay"),
-            _number(link.get("jitter", 0.0), f"{at}.link.jitter"),
-            distribution,
-        ),
-        burst=burst,
-        promotion=(lo, hi),
-        outages=tuple(outages),
-        **numbers,
+def _link_model(link: LinkTable, at: str) -> LinkModel:
+    """The link ``link`` describes; an ``Invalid`` for windows that end before they begin."""
+    shortest, longest = link.promotion
+    if longest < shortest:
+        raise Invalid(f"{at}.promotion", f"has its longest, {longest:g} s, below its shortest, {shortest:g} s")
+    for k, (start, end) in enumerate(link.outages):
+        if end < start:
+            raise Invalid(f"{at}.outages[{k}]", f"ends at {end:g} s, before it starts at {start:g} s")
+    return LinkModel(
+        delay=Delay(link.delay, link.jitter, link.distribution),
+        loss=link.loss,
+        burst=link.burst,
+        duplicate=link.duplicate,
+        reorder=link.reorder,
+        rate=link.rate,
+        idle_after=link.idle_after,
+        promotion=link.promotion,
+        outages=tuple(Outage(start, end) for start, end in link.outages),
+        retransmit=link.retransmit,
     )
-    return Profile(
-        name=name,
-        description=str(table.get("description", "")),
-        sources=tuple(str(s) for s in table.get("sources", [])),
-        link=model,
-        gps=_struct(GpsError, table.get("gps", {}), f"{at}.gps"),
-        compass=_struct(CompassError, table.get("compass", {}), f"{at}.compass"),
-    )
-
-
-def _struct(cls, table, at: str):
-    _only(table, {f.name for f in fields(cls)}, at)
-    return cls(**{k: _number(v, f"{at}.{k}", probability=k in _PROBABILITIES) for k, v in table.items()})
-
-
-def _only(table, allowed: set[str], at: str) -> None:
-    if not isinstance(table, dict):
-        raise ProfileError(f"{at} must be a table")
-    for key in table:
-        if key not in allowed:
-            raise ProfileError(f"{at} has no key {key!r}; the keys are {', '.join(sorted(allowed))}")
-
-
-def _number(value, at: str, *, probability: bool = False) -> float:
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value) or value < 0:
-        raise ProfileError(f"{at} must be a non-negative number, got {value!r}")
-    if probability and value > 1:
-        raise ProfileError(f"{at} is a probability and must lie in [0, 1], got {value!r}")
-    return float(value)

@@ -143,20 +143,20 @@ class _CtfGame:
             game_map,
             self.attacker.speed,
             self.defender.speed,
-            capture_radius=r["capture_radius"],
-            capture_time=r["capture_time"],
-            return_time=r["return_time"],
+            capture_radius=r.capture_radius,
+            capture_time=r.capture_time,
+            return_time=r.return_time,
         )
-        coarse = unresolved_capture(game_map, r["grid"], self.rules.capture_radius)
+        coarse = unresolved_capture(game_map, r.grid, self.rules.capture_radius)
         if coarse is not None:
             raise ScenarioError(
                 f"{scenario.source}: rules.capture_radius {self.rules.capture_radius:g} m is less than a cell of the "
-                f"{r['grid']}-point grid on map {game_map.name} ({coarse[0]:.2f} m), too coarse to resolve capture; "
+                f"{r.grid}-point grid on map {game_map.name} ({coarse[0]:.2f} m), too coarse to resolve capture; "
                 f"raise rules.grid to at least {coarse[1]} or the radius"
             )
         self.flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
         self.home = shapely.union_all([g.geometry for g in game_map.regions_with_role("return")])
-        self.flag_taken = r["stages"] == "return"
+        self.flag_taken = r.stages == "return"
         self.phase = "return" if self.flag_taken else "capture"
         self.goals = {"capture": self.flag, "return": self.home}
         self._navigator = None
@@ -164,13 +164,13 @@ class _CtfGame:
         self._tasker = None
         teams = {a.id: a.team for a in scenario.agents} | {u.id: u.team for u in scenario.uavs}
         self.sight = Sight(
-            game_map, teams, line_of_sight=r["visibility"] == "line-of-sight", uavs=[u.id for u in scenario.uavs]
+            game_map, teams, line_of_sight=r.visibility == "line-of-sight", uavs=[u.id for u in scenario.uavs]
         )
 
     def solved(self, progress=None) -> CtfQueries:
         if self._solved is None:
             s = self.scenario
-            found = load_or_solve(CtfGame(s.map, s.rules["grid"], self.rules), s.rules["stages"], progress=progress)
+            found = load_or_solve(CtfGame(s.map, s.rules.grid, self.rules), s.rules.stages, progress=progress)
             self._solved = CtfQueries(found.solution)
         return self._solved
 
@@ -287,7 +287,7 @@ class _PursuitGame:
         contest = Contest(
             runners=(self.evader.id,),
             chasers=tuple(p.id for p in self.pursuers),
-            capture_radius=self.scenario.rules["capture_radius"],
+            capture_radius=self.scenario.rules.capture_radius,
             time_limit=self.scenario.time_limit,
             teams=("evader", "pursuer"),
             lasting_wins=True,
@@ -321,11 +321,11 @@ class _ReachAvoidGame:
             raise ScenarioError(f"{scenario.source}: a reach-avoid game has one attacker")
         self.attacker = attackers[0]
         self.defenders = scenario.team("defender")
-        names = scenario.rules["targets"]
+        names = scenario.rules.targets
         self.targets = [(n, scenario.map.region(n).geometry) for n in names]
         self.goals = {"capture": self.targets[0][1], "return": self.targets[-1][1]}
         xmin, ymin, xmax, ymax = scenario.map.bounds
-        self.radius = scenario.rules["capture_radius"] or 0.005 * max(xmax - xmin, ymax - ymin)
+        self.radius = scenario.rules.capture_radius or 0.005 * max(xmax - xmin, ymax - ymin)
         self._navigator = None
 
     def referee(self, on_truth: bool = True) -> Referee:
@@ -346,10 +346,10 @@ class _ReachAvoidGame:
             s.map,
             attacker=self.attacker.id,
             defenders=[d.id for d in self.defenders],
-            targets=s.rules["targets"],
+            targets=s.rules.targets,
             speeds={a.id: a.speed for a in s.agents},
             capture_radius=self.radius,
-            spacing=s.rules["spacing"] or max(xmax - xmin, ymax - ymin) / 200,
+            spacing=s.rules.spacing or max(xmax - xmin, ymax - ymin) / 200,
         )
         return GuidanceService(
             s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate

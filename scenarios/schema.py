@@ -12,7 +12,7 @@ whether their phone shows reachability guidance::
     netem = "wifi"               # a profile of netem/profiles.toml
     seed = 0
 
-    [rules]                      # per game; see RULE_KEYS
+    [rules]                      # per game: CtfRules, ReachAvoidRules, PursuitRules
     capture_radius = 2.5
 
     [guidance]
@@ -35,117 +35,242 @@ whether their phone shows reachability guidance::
     search = "reachability"      # reachability | lawnmower | nearest
     steer = "goto"               # goto | velocity (offboard setpoints)
 
-Every error is one sentence naming the file and the key, such as
-``fake-out.toml: agent[1].behaviour 'fakeout' is not one of ...``.
+The Structs below are the schema: every key with its type, its bounds and
+its default, declared once. msgspec checks a file against them; a second
+pass checks what needs the map (starts, hold points and waypoints in the
+free space, regions the rules name). Every error is one sentence naming
+the file and the key path, list indices counted from 0, such as
+``fake-out.toml: agent[0].behaviour: 'fakeout' is not one of ...``.
 """
 
 from __future__ import annotations
 
-import math
 import tomllib
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import msgspec
+from msgspec import Meta
+from shapely.geometry import Polygon
 
 from bearcat.agents.uav.agent import FAILSAFES, STEERING
+from bearcat.bus.messages import Name
+from bearcat.bus.validation import Invalid, convert, not_one_of
 from bearcat.maps import Map, MapError, load_map
-from bearcat.netem.profiles import ProfileError, load_profile
+from bearcat.maps.model import check_polygonal
+from bearcat.netem.profiles import load_profiles
 
-GAMES = ("ctf", "reach-avoid", "pursuit")
 TEAMS = {"ctf": ("attacker", "defender"), "reach-avoid": ("attacker", "defender"), "pursuit": ("evader", "pursuer")}
-BEHAVIOURS = ("follow-guidance", "direct", "fake-out", "go-no-go", "waypoints", "patrol", "keyboard")
-SEARCHES = ("reachability", "lawnmower", "nearest")
+MAX_CELLS = 2000
+"""Most cells across the map that ``rules.spacing`` may ask of the fast-marching grid."""
 
-# Per game, the rules keys with their defaults (None: derived from the map and speeds).
-RULE_KEYS = {
-    "ctf": {
-        "capture_radius": None,
-        "stages": "return",
-        "grid": 45,
-        "capture_time": None,
-        "return_time": None,
-        "visibility": "full",
-    },
-    "reach-avoid": {"capture_radius": None, "targets": ["flag", "home"], "spacing": None},
-    "pursuit": {"capture_radius": 0.5, "spacing": None, "strategy": "area"},
-}
-# Per behaviour, its option keys and defaults.
-BEHAVIOUR_OPTIONS = {
-    "follow-guidance": {},
-    "direct": {"standoff": 6.0, "share": 0.5, "lead": 1.5},
-    "fake-out": {"turn_every": 1.5, "spread": 100.0, "margin": 0.0},
-    "go-no-go": {"hold": None, "fresh": 2.0, "margin": 0.0, "flee": 0.0},
-    "waypoints": {"points": None, "loop": False},
-    "patrol": {"points": None, "standoff": 6.0, "share": 0.5, "lead": 1.5, "memory": 5.0, "wander": False},
-    "keyboard": {},
-}
-_AGENT_KEYS = {
-    "id",
-    "team",
-    "start",
-    "speed",
-    "behaviour",
-    "aided",
-    "fix_rate",
-    "reaction",
-    "heading_error",
-    "options",
-}
-
-
-# UAV keys and their defaults (None: required).
-UAV_KEYS = {
-    "id": None,
-    "team": None,
-    "start": None,
-    "altitude": 20.0,
-    "camera_radius": 15.0,
-    "speed": 8.0,
-    "accel": 3.0,
-    "search": "reachability",
-    "failsafe": "hold",
-    "link_timeout": 5.0,
-    "fix_rate": 2.0,
-    "steer": "goto",
-}
+Game = Literal[tuple(TEAMS)]
+Team = Literal[tuple(dict.fromkeys(team for teams in TEAMS.values() for team in teams))]
+ProfileName = Literal[tuple(load_profiles())]
+Coordinate = Annotated[float, Meta(ge=-1e7, le=1e7, extra={"unit": "m"})]
+Point = Annotated[tuple[Coordinate, Coordinate], Meta(description="[east, north] in metres")]
+Route = Annotated[tuple[Point, ...], Meta(min_length=1, description="a list of [east, north] points in metres")]
+Ring = Annotated[tuple[Point, ...], Meta(min_length=3, description="a polygon of at least 3 [east, north] points")]
+Rate = Annotated[float, Meta(ge=0.01, le=50.0, extra={"unit": "Hz"})]
+Distance = Annotated[float, Meta(ge=0.0, le=1000.0, extra={"unit": "m"})]
+Radius = Annotated[float, Meta(gt=0.0, le=1000.0, extra={"unit": "m"})]
+Share = Annotated[float, Meta(ge=0.0, le=1.0)]
+Angle = Annotated[float, Meta(ge=0.0, le=180.0, extra={"unit": "degrees"})]
+Lag = Annotated[float, Meta(ge=0.0, le=60.0, extra={"unit": "s"})]
+Period = Annotated[float, Meta(gt=0.0, le=3600.0, extra={"unit": "s"})]
+Memory = Annotated[float, Meta(ge=0.0, le=3600.0, extra={"unit": "s"})]
+WalkingSpeed = Annotated[float, Meta(gt=0.0, le=15.0, extra={"unit": "m/s"})]
+"""A person's top speed: a sprinter peaks at 12.4 m/s."""
 
 
 class ScenarioError(ValueError):
     """A scenario that cannot be run; the text names the file and the key."""
 
 
-@dataclass(frozen=True)
-class AgentSpec:
-    id: str
-    team: str
-    start: tuple[float, float]
-    speed: float
-    behaviour: str
+class _Table(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
+    """A TOML table: its keys are exactly the fields."""
+
+
+# ---------------------------------------------------------------- behaviours
+
+
+class _Options(_Table):
+    def places(self) -> tuple[tuple[str, tuple[float, float]], ...]:
+        """(key, point) of every point these options send the agent to, checked against the map."""
+        return ()
+
+
+class NoOptions(_Options):
+    pass
+
+
+class UnaidedOptions(_Options):
+    standoff: Distance = 6.0
+    share: Share = 0.5
+    lead: Lag = 1.5
+
+
+class FakeOutOptions(_Options):
+    turn_every: Annotated[float, Meta(gt=0.0, le=600.0, extra={"unit": "s"})] = 1.5
+    spread: Angle = 100.0
+    margin: Distance = 0.0
+
+
+class GoNoGoOptions(_Options):
+    hold: Point
+    fresh: Period = 2.0
+    margin: Distance = 0.0
+    flee: Distance = 0.0
+
+    def places(self):
+        return (("hold", self.hold),)
+
+
+class WaypointsOptions(_Options):
+    points: Route
+    loop: bool = False
+
+    def places(self):
+        return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
+
+
+class PatrolOptions(UnaidedOptions, kw_only=True):
+    points: Route
+    memory: Memory = 5.0
+    wander: bool = False
+
+    def places(self):
+        return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
+
+
+# ---------------------------------------------------------------- players
+
+
+class AgentSpec(_Table, tag_field="behaviour"):
+    """A person: one subclass per behaviour, each with its options."""
+
+    id: Name
+    team: Team
+    start: Point
+    speed: WalkingSpeed
     aided: bool = True
-    fix_rate: float = 1.0  # Hz of GPS fixes
-    reaction: float = 0.4  # s from a display change to the body turning
-    heading_error: float = 10.0  # degrees, standard deviation of following a displayed heading
-    options: dict = field(default_factory=dict)
+    fix_rate: Rate = 1.0
+    reaction: Annotated[float, Meta(ge=0.0, le=10.0, extra={"unit": "s"})] = 0.4  # from a display change to a turn
+    heading_error: Angle = 10.0  # standard deviation of following a displayed heading
+
+    @property
+    def behaviour(self) -> str:
+        return self.__struct_config__.tag
 
 
-@dataclass(frozen=True)
-class UavSpec:
+class FollowGuidanceAgent(AgentSpec, tag="follow-guidance"):
+    options: NoOptions = NoOptions()
+
+
+class UnaidedAgent(AgentSpec, tag="direct"):
+    options: UnaidedOptions = UnaidedOptions()
+
+
+class FakeOutAgent(AgentSpec, tag="fake-out"):
+    options: FakeOutOptions = FakeOutOptions()
+
+
+class GoNoGoAgent(AgentSpec, tag="go-no-go", kw_only=True):
+    options: GoNoGoOptions
+
+
+class WaypointsAgent(AgentSpec, tag="waypoints", kw_only=True):
+    options: WaypointsOptions
+
+
+class PatrolAgent(AgentSpec, tag="patrol", kw_only=True):
+    options: PatrolOptions
+
+
+class KeyboardAgent(AgentSpec, tag="keyboard"):
+    options: NoOptions = NoOptions()
+
+
+Agent = FollowGuidanceAgent | UnaidedAgent | FakeOutAgent | GoNoGoAgent | WaypointsAgent | PatrolAgent | KeyboardAgent
+
+
+class UavSpec(_Table):
     """A quadrotor flying for ``team``: its take-off point, altitude above
     home, camera footprint radius r_q, limits, how the ground station tasks
     it, and what it does when it loses the ground station."""
 
-    id: str
-    team: str
-    start: tuple[float, float]
-    altitude: float = 20.0
-    camera_radius: float = 15.0
-    speed: float = 8.0
-    accel: float = 3.0
-    search: str = "reachability"
-    failsafe: str = "hold"
-    link_timeout: float = 5.0
-    fix_rate: float = 2.0
-    steer: str = "goto"
+    id: Name
+    team: Team
+    start: Point
+    altitude: Annotated[float, Meta(gt=0.0, le=500.0, extra={"unit": "m"})] = 20.0
+    camera_radius: Radius = 15.0
+    speed: Annotated[float, Meta(gt=0.0, le=40.0, extra={"unit": "m/s"})] = 8.0
+    accel: Annotated[float, Meta(gt=0.0, le=20.0, extra={"unit": "m/s^2"})] = 3.0
+    search: Literal["reachability", "lawnmower", "nearest"] = "reachability"
+    failsafe: Literal[FAILSAFES] = "hold"
+    link_timeout: Period = 5.0
+    fix_rate: Rate = 2.0
+    steer: Literal[STEERING] = "goto"
+
+
+# ---------------------------------------------------------------- rules per game
+
+Horizon = Annotated[float, Meta(gt=0.0, le=3600.0, extra={"unit": "s"})]
+Spacing = Annotated[float, Meta(gt=0.0, le=100.0, extra={"unit": "m"})]
+
+
+class CtfRules(_Table):
+    """Unset radius and times are derived from the map and the speeds (``ctf_cache.default_rules``)."""
+
+    capture_radius: Radius | None = None
+    stages: Literal["return", "both"] = "return"
+    grid: Annotated[int, Meta(ge=9, le=201)] = 45
+    capture_time: Horizon | None = None
+    return_time: Horizon | None = None
+    visibility: Literal["full", "line-of-sight"] = "full"
+
+
+class ReachAvoidRules(_Table):
+    capture_radius: Radius | None = None
+    targets: Annotated[tuple[Annotated[str, Meta(min_length=1)], ...], Meta(min_length=1)] = ("flag", "home")
+    spacing: Spacing | None = None
+
+
+class PursuitRules(_Table):
+    capture_radius: Radius = 0.5
+    spacing: Spacing | None = None
+    strategy: Literal["area", "pure"] = "area"
+
+
+RULES = {"ctf": CtfRules, "reach-avoid": ReachAvoidRules, "pursuit": PursuitRules}
+
+
+# ---------------------------------------------------------------- the file
+
+
+class ScenarioTable(_Table):
+    name: Name  # names the game on the bus
+    map: Annotated[str, Meta(min_length=1)]
+    game: Game
+    time_limit: Annotated[float, Meta(gt=0.0, le=86400.0, extra={"unit": "s"})]
+    description: str = ""
+    netem: ProfileName = "ideal"
+    seed: Annotated[int, Meta(ge=0)] = 0
+    dead_zones: Annotated[tuple[Ring, ...], Meta(description="a list of polygons of [east, north] points")] = ()
+
+
+class GuidanceTable(_Table):
+    rate: Rate = 10.0
+
+
+class ScenarioFile(_Table):
+    scenario: ScenarioTable
+    agent: Annotated[tuple[Agent, ...], Meta(min_length=1, description="at least one [[agent]] table")]
+    rules: dict[str, Any] = {}
+    guidance: GuidanceTable = GuidanceTable()
+    uav: tuple[UavSpec, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -157,13 +282,13 @@ class Scenario:
     time_limit: float
     netem: str
     seed: int
-    rules: dict
+    rules: CtfRules | ReachAvoidRules | PursuitRules
     guidance_rate: float
     agents: tuple[AgentSpec, ...]
-    description: str = ""
-    text: str = ""  # the TOML it was read from, served to peers that ask
-    dead_zones: tuple[tuple[tuple[float, float], ...], ...] = ()
-    uavs: tuple[UavSpec, ...] = ()
+    description: str
+    text: str  # the TOML it was read from, served to peers that ask
+    dead_zones: tuple[tuple[tuple[float, float], ...], ...]
+    uavs: tuple[UavSpec, ...]
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
@@ -200,7 +325,13 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(
             f"there is no scenario {str(name_or_path)!r}: not a built-in one ({', '.join(list_scenarios())}) nor a file"
         )
-    return parse_scenario(path.read_text(encoding="utf-8"), source=str(path))
+    try:
+        text = path.read_text(encoding="utf-8")
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{path} is not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x})") from None
+    except OSError as exc:
+        raise ScenarioError(f"{path} cannot be read: {exc.strerror}") from None
+    return parse_scenario(text, source=str(path))
 
 
 def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | None = None) -> Scenario:
@@ -210,253 +341,76 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{source} is not valid TOML: {exc}") from None
-    c = _Checker(source)
-    c.only(data, {"scenario", "rules", "guidance", "agent", "uav"}, "")
-    head = c.table(data, "scenario", "")
-    c.only(head, {"name", "description", "map", "game", "time_limit", "netem", "seed", "dead_zones"}, "scenario")
-    game = c.choice(head, "game", GAMES, "scenario")
-    if game_map is None:
-        try:
-            game_map = load_map(c.text(head, "map", "scenario"))
-        except MapError as exc:
-            raise ScenarioError(f"{source}: scenario.map: {exc}") from None
-    netem = head.get("netem", "ideal")
+    except RecursionError:
+        raise ScenarioError(f"{source} nests arrays or tables too deeply to be a scenario") from None
     try:
-        load_profile(netem)
-    except ProfileError as exc:
-        raise ScenarioError(f"{source}: scenario.netem: {exc}") from None
-    rules = _rules(c, c.table(data, "rules", "", required=False), game, game_map)
-    guidance = c.table(data, "guidance", "", required=False)
-    c.only(guidance, {"rate"}, "guidance")
-    raw_agents = data.get("agent")
-    if not isinstance(raw_agents, list) or not raw_agents:
-        raise ScenarioError(f"{source}: a scenario needs at least one [[agent]]")
-    agents = tuple(_agent(c, raw, k, game, game_map) for k, raw in enumerate(raw_agents))
-    raw_uavs = data.get("uav", [])
-    if not isinstance(raw_uavs, list):
-        c.fail("uav must be an array of tables: [[uav]]")
-    uavs = tuple(_uav(c, raw, k, game, game_map) for k, raw in enumerate(raw_uavs))
-    ids = [a.id for a in agents] + [u.id for u in uavs]
-    if len(set(ids)) != len(ids):
-        twice = sorted({i for i in ids if ids.count(i) > 1})
-        raise ScenarioError(f"{source}: agent id {twice[0]!r} is used twice")
-    for team in TEAMS[game]:
-        if not any(a.team == team for a in agents):
-            raise ScenarioError(f"{source}: a {game} game needs at least one agent of team {team!r}")
-    zones = []
-    for k, ring in enumerate(head.get("dead_zones", [])):
-        zones.append(tuple(c.point(p, f"scenario.dead_zones[{k}]") for p in ring))
-        if len(zones[-1]) < 3:
-            raise ScenarioError(f"{source}: scenario.dead_zones[{k}] needs at least 3 points")
-    name = c.text(head, "name", "scenario")
-    if not name.replace("-", "").replace("_", "").isalnum() or not name.isascii() or len(name) > 64:
-        c.fail(f"scenario.name {name!r} must be up to 64 letters, digits, '-' or '_' (it names the game on the bus)")
+        file = convert(data, ScenarioFile)
+        head = file.scenario
+        rules = convert(file.rules, RULES[head.game], at="rules")
+        if game_map is None:
+            try:
+                game_map = load_map(head.map)
+            except MapError as exc:
+                raise Invalid("scenario.map", str(exc)) from None
+        _check_against(file, rules, game_map)
+    except (Invalid, MapError) as exc:
+        raise ScenarioError(f"{source}: {exc}") from None
     return Scenario(
-        name=name,
+        name=head.name,
         source=source,
         map=game_map,
-        game=game,
-        time_limit=c.number(head, "time_limit", "scenario", positive=True),
-        netem=netem,
-        seed=int(c.integer(head, "seed", "scenario", default=0)),
+        game=head.game,
+        time_limit=head.time_limit,
+        netem=head.netem,
+        seed=head.seed,
         rules=rules,
-        guidance_rate=c.number(guidance, "rate", "guidance", default=10.0, positive=True),
-        agents=agents,
-        description=str(head.get("description", "")),
+        guidance_rate=file.guidance.rate,
+        agents=file.agent,
+        description=head.description,
         text=text,
-        dead_zones=tuple(zones),
-        uavs=uavs,
+        dead_zones=head.dead_zones,
+        uavs=file.uav,
     )
 
 
-def _agent(c: _Checker, raw, k: int, game: str, game_map: Map) -> AgentSpec:
-    at = f"agent[{k}]"
-    if not isinstance(raw, dict):
-        raise ScenarioError(f"{c.source}: {at} must be a table")
-    c.only(raw, _AGENT_KEYS, at)
-    agent_id = c.text(raw, "id", at)
-    if not agent_id.replace("-", "").replace("_", "").isalnum() or not agent_id.isascii() or len(agent_id) > 64:
-        raise ScenarioError(f"{c.source}: {at}.id {agent_id!r} must be letters, digits, '-' or '_'")
-    team = c.choice(raw, "team", TEAMS[game], at)
-    start = c.point(raw.get("start"), f"{at}.start")
-    try:
-        game_map.check_position(start, f"{at}.start")
-    except MapError as exc:
-        raise ScenarioError(f"{c.source}: {exc}") from None
-    behaviour = c.choice(raw, "behaviour", BEHAVIOURS, at)
-    options = dict(BEHAVIOUR_OPTIONS[behaviour])
-    given = c.table(raw, "options", at, required=False)
-    c.only(given, set(options), f"{at}.options")
-    options.update(given)
-    missing = [key for key, value in options.items() if value is None]
-    if missing:
-        raise ScenarioError(f"{c.source}: {at}.options.{missing[0]} is required by behaviour {behaviour!r}")
-    if behaviour == "go-no-go":
-        options["hold"] = c.point(options["hold"], f"{at}.options.hold")
-        options["fresh"] = c.number(options, "fresh", f"{at}.options", positive=True)
-        options["margin"] = c.number(options, "margin", f"{at}.options")
-        options["flee"] = c.number(options, "flee", f"{at}.options")
-    elif behaviour in ("waypoints", "patrol"):
-        points = options["points"]
-        if not isinstance(points, list) or not points:
-            c.fail(f"{at}.options.points must be a list of [east, north] points")
-        for j, point in enumerate(points):
-            try:
-                game_map.check_position(c.point(point, f"{at}.options.points[{j}]"), f"{at}.options.points[{j}]")
-            except MapError as exc:
-                raise ScenarioError(f"{c.source}: {exc}") from None
-        checked = {"points": [c.point(p, f"{at}.options.points[{j}]") for j, p in enumerate(points)]}
-        if behaviour == "waypoints":
-            checked["loop"] = c.boolean(options, "loop", f"{at}.options", default=False)
-        else:
-            checked.update({k: c.number(options, k, f"{at}.options") for k in ("standoff", "share", "lead", "memory")})
-            checked["wander"] = c.boolean(options, "wander", f"{at}.options", default=False)
-        options = checked
-    elif behaviour == "direct":
-        options = {k: c.number(options, k, f"{at}.options") for k in options}
-    elif behaviour == "fake-out":
-        options = {k: c.number(options, k, f"{at}.options", positive=k != "margin") for k in options}
-    return AgentSpec(
-        id=agent_id,
-        team=team,
-        start=start,
-        speed=c.number(raw, "speed", at, positive=True),
-        behaviour=behaviour,
-        aided=c.boolean(raw, "aided", at, default=True),
-        fix_rate=c.number(raw, "fix_rate", at, default=1.0, positive=True),
-        reaction=c.number(raw, "reaction", at, default=0.4),
-        heading_error=c.number(raw, "heading_error", at, default=10.0),
-        options=options,
-    )
-
-
-def _uav(c: _Checker, raw, k: int, game: str, game_map: Map) -> UavSpec:
-    at = f"uav[{k}]"
-    if not isinstance(raw, dict):
-        c.fail(f"{at} must be a table")
-    c.only(raw, set(UAV_KEYS), at)
-    given = {**UAV_KEYS, **raw}
-    for key, value in given.items():
-        if value is None:
-            c.fail(f"{at}.{key} is required")
-    uav_id = c.text(given, "id", at)
-    if not uav_id.replace("-", "").replace("_", "").isalnum() or not uav_id.isascii() or len(uav_id) > 64:
-        c.fail(f"{at}.id {uav_id!r} must be letters, digits, '-' or '_'")
-    start = c.point(given["start"], f"{at}.start")
+def _check_against(file: ScenarioFile, rules, game_map: Map) -> None:
+    """What needs the game and the map: teams, places, regions, grid sizes, who plays."""
+    game = file.scenario.game
+    teams = TEAMS[game]
+    for kind, specs in (("agent", file.agent), ("uav", file.uav)):
+        for k, spec in enumerate(specs):
+            if spec.team not in teams:
+                raise Invalid(f"{kind}[{k}].team", f"{not_one_of(spec.team, teams)} (the teams of a {game} game)")
+    for k, agent in enumerate(file.agent):
+        game_map.check_position(agent.start, f"agent[{k}].start")
+        for key, point in agent.options.places():
+            game_map.check_position(point, f"agent[{k}].options.{key}")
     xmin, ymin, xmax, ymax = game_map.bounds
-    if not (xmin <= start[0] <= xmax and ymin <= start[1] <= ymax):
-        c.fail(f"{at}.start {list(start)} is off map {game_map.name} ({xmin:g}..{xmax:g} x {ymin:g}..{ymax:g} m)")
-    return UavSpec(
-        id=uav_id,
-        team=c.choice(given, "team", TEAMS[game], at),
-        start=start,
-        altitude=c.number(given, "altitude", at, positive=True),
-        camera_radius=c.number(given, "camera_radius", at, positive=True),
-        speed=c.number(given, "speed", at, positive=True),
-        accel=c.number(given, "accel", at, positive=True),
-        search=c.choice(given, "search", SEARCHES, at),
-        failsafe=c.choice(given, "failsafe", FAILSAFES, at),
-        link_timeout=c.number(given, "link_timeout", at, positive=True),
-        fix_rate=c.number(given, "fix_rate", at, positive=True),
-        steer=c.choice(given, "steer", STEERING, at),
-    )
-
-
-def _rules(c: _Checker, given: dict, game: str, game_map: Map) -> dict:
-    rules = dict(RULE_KEYS[game])
-    c.only(given, set(rules), "rules")
-    rules.update(given)
-    for key in ("capture_radius", "capture_time", "return_time", "spacing"):
-        if rules.get(key) is not None:
-            rules[key] = c.number(rules, key, "rules", positive=key != "capture_radius")
-    if game == "ctf":
-        rules["stages"] = c.choice(rules, "stages", ("return", "both"), "rules")
-        rules["visibility"] = c.choice(rules, "visibility", ("full", "line-of-sight"), "rules")
-        grid = rules["grid"]
-        if isinstance(grid, bool) or not isinstance(grid, int) or not 9 <= grid <= 201:
-            c.fail(f"rules.grid must be an integer from 9 to 201, got {grid!r}")
-    elif game == "reach-avoid":
-        targets = rules["targets"]
-        if not isinstance(targets, list) or not targets:
-            c.fail("rules.targets must be a list of region names of the map")
-        for name in targets:
-            if not isinstance(name, str) or name not in game_map.regions:
-                c.fail(
-                    f"rules.targets: map {game_map.name} has no region {name!r}; its regions are "
-                    f"{', '.join(game_map.regions) or 'none'}"
-                )
-    else:
-        rules["strategy"] = c.choice(rules, "strategy", ("area", "pure"), "rules")
-    return rules
-
-
-class _Checker:
-    """Typed reads of TOML values whose errors name the file and the key."""
-
-    def __init__(self, source: str) -> None:
-        self.source = source
-
-    def fail(self, message: str):
-        raise ScenarioError(f"{self.source}: {message}")
-
-    @staticmethod
-    def _name(at: str, key: str) -> str:
-        return f"{at}.{key}" if at else key
-
-    def only(self, table: dict, allowed: set[str], at: str) -> None:
-        for key in table:
-            if key not in allowed:
-                self.fail(f"{self._name(at, key)} is not a known key; the keys there are {', '.join(sorted(allowed))}")
-
-    def table(self, data: dict, key: str, at: str, required: bool = True) -> dict:
-        if key not in data:
-            if required:
-                self.fail(f"[{self._name(at, key)}] is missing")
-            return {}
-        if not isinstance(data[key], dict):
-            self.fail(f"{self._name(at, key)} must be a table")
-        return data[key]
-
-    def text(self, data: dict, key: str, at: str) -> str:
-        value = data.get(key)
-        if not isinstance(value, str) or not value:
-            self.fail(f"{self._name(at, key)} must be a non-empty string, got {value!r}")
-        return value
-
-    def choice(self, data: dict, key: str, options, at: str) -> str:
-        value = data.get(key)
-        if value not in options:
-            self.fail(f"{self._name(at, key)} {value!r} is not one of {', '.join(options)}")
-        return value
-
-    def number(self, data: dict, key: str, at: str, *, default=None, positive: bool = False) -> float:
-        value = data.get(key, default)
-        name = self._name(at, key)
-        if value is None:
-            self.fail(f"{name} is required")
-        if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-            self.fail(f"{name} must be a number, got {value!r}")
-        if value < 0 or (positive and value == 0):
-            self.fail(f"{name} must be {'positive' if positive else 'non-negative'}, got {value!r}")
-        return float(value)
-
-    def integer(self, data: dict, key: str, at: str, *, default=None) -> int:
-        value = data.get(key, default)
-        if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-            self.fail(f"{self._name(at, key)} must be a non-negative integer, got {value!r}")
-        return value
-
-    def boolean(self, data: dict, key: str, at: str, *, default: bool) -> bool:
-        value = data.get(key, default)
-        if not isinstance(value, bool):
-            self.fail(f"{self._name(at, key)} must be true or false, got {value!r}")
-        return value
-
-    def point(self, value, at: str) -> tuple[float, float]:
-        if (
-            not isinstance(value, list)
-            or len(value) != 2
-            or not all(isinstance(v, int | float) and not isinstance(v, bool) and math.isfinite(v) for v in value)
-        ):
-            self.fail(f"{at} must be [east, north] in metres, got {value!r}")
-        return float(value[0]), float(value[1])
+    for k, uav in enumerate(file.uav):
+        x, y = uav.start
+        if not (xmin <= x <= xmax and ymin <= y <= ymax):
+            raise Invalid(
+                f"uav[{k}].start",
+                f"{list(uav.start)} is off map {game_map.name} ({xmin:g}..{xmax:g} x {ymin:g}..{ymax:g} m)",
+            )
+    for k, ring in enumerate(file.scenario.dead_zones):
+        check_polygonal(Polygon(ring), f"scenario.dead_zones[{k}]")
+    for name in getattr(rules, "targets", ()):
+        if name not in game_map.regions:
+            regions = ", ".join(game_map.regions) or "none"
+            raise Invalid("rules.targets", f"map {game_map.name} has no region {name!r}; its regions are {regions}")
+    spacing = getattr(rules, "spacing", None)
+    side = max(xmax - xmin, ymax - ymin)
+    if spacing is not None and not 2 <= side / spacing <= MAX_CELLS:
+        raise Invalid(
+            "rules.spacing",
+            f"{spacing:g} m makes {side / spacing:.0f} cells across map {game_map.name} ({side:g} m); "
+            f"2 to {MAX_CELLS} are allowed",
+        )
+    ids = [a.id for a in file.agent] + [u.id for u in file.uav]
+    twice = sorted({i for i in ids if ids.count(i) > 1})
+    if twice:
+        raise Invalid("", f"agent id {twice[0]!r} is used twice")
+    for team in teams:
+        if not any(a.team == team for a in file.agent):
+            raise Invalid("", f"a {game} game needs at least one agent of team {team!r}")

@@ -43,12 +43,16 @@ def play_task(task: dict) -> dict:
     import tempfile
     from dataclasses import asdict, replace
 
+    import msgspec
+
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.simulate import simulate
 
     scenario = load_scenario(task["scenario"])
     if task.get("search") is not None:
-        scenario = replace(scenario, uavs=tuple(replace(u, search=task["search"]) for u in scenario.uavs))
+        scenario = replace(
+            scenario, uavs=tuple(msgspec.structs.replace(u, search=task["search"]) for u in scenario.uavs)
+        )
     with tempfile.TemporaryDirectory() as tmp:
         events = f"{tmp}/events.jsonl"
         outcome = simulate(scenario, seed=task["seed"], netem=task["netem"], events=events)

@@ -430,15 +430,31 @@ def test_the_flag_return_stage_is_shared_through_the_cache(game, tmp_path):
     assert load_or_solve(longer, "both", root=tmp_path).sources == {"return": "cache", "win": "solved"}
 
 
-@pytest.mark.parametrize("damage", ["garbage", "truncated"])
+@pytest.mark.parametrize("damage", ["garbage", "truncated", "not finite"])
 def test_a_damaged_cache_file_is_solved_again(game, tmp_path, damage):
+    """A set written with NaN (by a solver that overflowed) counts as damaged too."""
     first = load_or_solve(game, "both", root=tmp_path)
     path = first.paths["return"]
-    path.write_bytes(b"\x93NUMPY garbage, not an array" * 4 if damage == "garbage" else path.read_bytes()[:300])
+    if damage == "not finite":
+        np.save(path, np.full_like(np.load(path), np.nan))
+    else:
+        path.write_bytes(b"\x93NUMPY garbage, not an array" * 4 if damage == "garbage" else path.read_bytes()[:300])
     again = load_or_solve(game, "both", root=tmp_path)
     assert again.sources == {"return": "solved", "win": "cache"}
     np.testing.assert_array_equal(again.solution.sets["return"].value, first.solution.sets["return"].value)
     assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "cache", "win": "cache"}
+
+
+def test_a_solve_that_overflows_is_neither_cached_nor_used(tmp_path):
+    """Speeds of 1e300 m/s overflow the HJI solver into NaN; the set is refused, not cached as converged."""
+    wild = CtfGame(load_map("ctf-10"), 13, Rules(attacker_speed=1e300, defender_speed=1e300), scheme="first")
+    with pytest.raises(
+        InputError,
+        match=r"^solving set 'return' on map ctf-10 gave a set whose value holds NaN or infinite numbers, so it is "
+        r"neither cached nor used: speeds 1e\+300 and 1e\+300 m/s, .* on a 13-point grid are beyond what the solver",
+    ):
+        load_or_solve(wild, "return", root=tmp_path)
+    assert not list(tmp_path.rglob("*.npy"))
 
 
 def test_an_empty_cache_file_is_solved_again(game, tmp_path):

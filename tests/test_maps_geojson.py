@@ -148,13 +148,31 @@ UNCLOSED = {"type": "Polygon", "coordinates": [[[0, 0], [1, 1]]]}
 DEGREES_HINT = r'; .*"units": "metres"'
 ZONE, REGION, OBSTACLE = r"feature 1 \(zone\): ", r"feature 1 \(region\): ", r"feature 1 \(obstacle\)"
 MALFORMED = [
-    ([AREA, feature("lake", SQUARE)], {}, "feature 1: property 'kind' must be one of area, obstacle, zone, region"),
+    (
+        [AREA, feature("lake", SQUARE)],
+        {},
+        "feature 1: property 'kind': 'lake' is not one of 'area', 'obstacle', 'zone', 'region'",
+    ),
     ([feature("obstacle", SQUARE)], {}, "must have exactly one feature of kind 'area', found none"),
     ([AREA, AREA], {}, "exactly one feature of kind 'area', found features 0, 1"),
-    ([AREA, feature("zone", SQUARE, speed=0)], {}, ZONE + r"property 'speed' must be a number in \(0, 1\], got 0"),
-    ([AREA, feature("zone", SQUARE, speed=1.5)], {}, ZONE + "property 'speed' .* got 1.5"),
-    ([AREA, feature("zone", SQUARE)], {}, ZONE + "property 'speed' .* got None"),
-    ([AREA, feature("zone", LINE, speed=1)], {}, ZONE + "property 'width' must be a number above zero"),
+    ([AREA, feature("zone", SQUARE, speed=0)], {}, ZONE + r"property 'speed': must be a number in \(0, 1\], got 0"),
+    ([AREA, feature("zone", SQUARE, speed=1.5)], {}, ZONE + "property 'speed': .* got 1.5"),
+    ([AREA, feature("zone", SQUARE)], {}, ZONE + r"property 'speed': must be given, as a number in \(0, 1\]"),
+    (
+        [AREA, feature("zone", SQUARE, speed=1, name="")],
+        {},
+        ZONE + "property 'name': must be a non-empty string, got ''",
+    ),
+    (
+        [AREA, feature("zone", LINE, speed=1, width=-2)],
+        {},
+        ZONE + r"property 'width': must be a number in \(0, 10000\] m",
+    ),
+    (
+        [AREA, feature("zone", LINE, speed=1)],
+        {},
+        ZONE + r"property 'width': must be given for a LineString, as a number in \(0, 10000\] m",
+    ),
     (
         [
             AREA,
@@ -164,13 +182,21 @@ MALFORMED = [
         {},
         r"feature 2 \(region\): property 'name' repeats region name 'flag'",
     ),
-    ([AREA, feature("region", SQUARE, role="flag")], {}, REGION + "property 'name' must be a non-empty string"),
+    (
+        [AREA, feature("region", SQUARE, role="flag")],
+        {},
+        REGION + "property 'name': must be given, as a non-empty string",
+    ),
     (
         [AREA, feature("region", SQUARE, name="f", role="base")],
         {},
-        REGION + "property 'role' must be one of flag, return",
+        REGION + "property 'role': 'base' is not one of 'flag', 'return', 'side', 'target'",
     ),
-    ([AREA, feature("region", POINT, name="f", role="flag")], {}, REGION + "property 'radius' must be a number above"),
+    (
+        [AREA, feature("region", POINT, name="f", role="flag")],
+        {},
+        REGION + "property 'radius': must be given for a Point, as a number in",
+    ),
     ([AREA, feature("obstacle", POINT)], {}, OBSTACLE + ": geometry must be one of Polygon, MultiPolygon; got Point"),
     ([AREA, feature("obstacle", BOWTIE)], {}, OBSTACLE + r": geometry is not a valid polygon \(Self-intersection"),
     ([AREA, feature("obstacle", UNCLOSED)], {}, OBSTACLE + ": geometry is not valid GeoJSON"),
@@ -210,6 +236,13 @@ def test_invalid_json_names_file_and_position(tmp_path):
     path = tmp_path / "broken.geojson"
     path.write_text('{"type": "FeatureCollection", "features": [}')
     with pytest.raises(MapError, match=f"map file {path} is not valid JSON .*line 1, column"):
+        load_map(path)
+
+
+def test_a_file_nested_too_deeply_is_named(tmp_path):
+    path = tmp_path / "deep.geojson"
+    path.write_text('{"type": "FeatureCollection", "features": ' + "[" * 100_000 + "]" * 100_000 + "}")
+    with pytest.raises(MapError, match=f"map file {path} nests arrays or objects too deeply to be a map"):
         load_map(path)
 
 

@@ -198,12 +198,56 @@ def test_3g_round_trip_matches_the_published_hspa_figure():
 def test_a_misspelt_profile_key_is_named_with_its_file(tmp_path):
     path = tmp_path / "p.toml"
     path.write_text("[mine.link]\ndealy = 0.1\n")
-    with pytest.raises(ProfileError, match=r"p.toml \[mine\].link has no key 'dealy'"):
+    with pytest.raises(ProfileError, match=r"p.toml: mine.link: unknown key 'dealy'; the keys there are delay, jitter"):
         load_profiles(path)
     with pytest.raises(ProfileError, match="no netem profile 'lte'"):
         load_profile("lte")
     path.write_text("[mine.link]\nloss = 1.5\n")
     with pytest.raises(ProfileError, match="probability"):
+        load_profiles(path)
+
+
+@pytest.mark.parametrize(
+    "text, culprit",
+    [
+        ("[mine.link]\nloss = 1.5\n", "mine.link.loss: must be a probability in [0, 1], got 1.5"),
+        (
+            "[mine.link]\nburst = { p = 0.1, r = -0.2 }\n",
+            "mine.link.burst.r: must be a probability in [0, 1], got -0.2",
+        ),
+        ("[mine.link]\nburst = { p = 0.1 }\n", "mine.link.burst.r: must be given, as a probability in [0, 1]"),
+        ("[mine.link]\ndelay = nan\n", "mine.link.delay: must be a number in [0, 60] s, got nan"),
+        ("[mine.link]\njitter = -0.1\n", "mine.link.jitter: must be a number in [0, 60] s, got -0.1"),
+        ("[mine.link]\nretransmit = 0.0\n", "mine.link.retransmit: must be a number in (0, 60] s, got 0.0"),
+        ("[mine.link]\nrate = inf\n", "mine.link.rate: must be a number in [0, 1e12] bytes/s, got inf"),
+        (
+            "[mine.link]\npromotion = [2.6, 1.0]\n",
+            "mine.link.promotion: has its longest, 1 s, below its shortest, 2.6 s",
+        ),
+        ("[mine.link]\noutages = 5\n", "mine.link.outages: must be a list, got 5"),
+        ("[mine.link]\noutages = [[5.0, 1.0]]\n", "mine.link.outages[0]: ends at 1 s, before it starts at 5 s"),
+        ("[mine.link]\ndistribution = 'cauchy'\n", "mine.link.distribution: 'cauchy' is not one of 'constant',"),
+        ("[mine.gps]\ntau = 0\n", "mine.gps.tau: must be a number in (0, 86400] s, got 0"),
+        ("[mine.gps]\nurban_dropout = 2\n", "mine.gps.urban_dropout: must be a probability in [0, 1], got 2"),
+        (
+            "[mine.compass]\nnoise_sigma = -inf\n",
+            "mine.compass.noise_sigma: must be a number in [0, 180] degrees, got -inf",
+        ),
+        ("mine = 5\n", "mine: must be a table, got 5"),
+    ],
+)
+def test_every_number_of_a_profile_has_its_bounds(tmp_path, text, culprit):
+    path = tmp_path / "p.toml"
+    path.write_text(text)
+    with pytest.raises(ProfileError) as error:
+        load_profiles(path)
+    assert str(error.value).startswith(f"{path}: {culprit}")
+
+
+def test_a_profile_file_that_is_not_utf8_is_named(tmp_path):
+    path = tmp_path / "p.toml"
+    path.write_bytes("[caf\xe9]\n".encode("latin-1"))
+    with pytest.raises(ProfileError, match=rf"^{path} is not UTF-8 text$"):
         load_profiles(path)
 
 

@@ -20,19 +20,38 @@ def test_the_studies_scenarios_are_built_in():
 @pytest.mark.parametrize(
     "change, culprit",
     [
-        (('behaviour = "fake-out"', 'behaviour = "fakeout"'), "agent[0].behaviour 'fakeout' is not one of"),
-        (("speed = 3.0", "sped = 3.0"), "agent[0].sped is not a known key"),
+        (
+            ('behaviour = "fake-out"', 'behaviour = "fakeout"'),
+            "agent[0].behaviour: 'fakeout' is not one of 'follow-guidance', 'direct', 'fake-out', 'go-no-go', "
+            "'waypoints', 'patrol', 'keyboard'",
+        ),
+        (("speed = 3.0", "sped = 3.0"), "agent[0]: unknown key 'sped'; the keys there are behaviour, id, team, start"),
         (('map = "field-50"', 'map = "field-5"'), "scenario.map: there is no built-in map 'field-5'"),
-        (('netem = "wifi"', 'netem = "lte"'), "scenario.netem: there is no netem profile 'lte'"),
-        (("grid = 21", "grid = 4"), "rules.grid must be an integer from 9 to 201"),
-        (('stages = "return"', 'stages = "flag"'), "rules.stages 'flag' is not one of"),
-        (("time_limit = 30.0", "time_limit = -1.0"), "scenario.time_limit must be positive"),
+        (
+            ('netem = "wifi"', 'netem = "lte"'),
+            "scenario.netem: 'lte' is not one of '3g', '3g-degraded', 'ideal', 'wifi'",
+        ),
+        (("grid = 21", "grid = 4"), "rules.grid: must be an integer from 9 to 201, got 4"),
+        (('stages = "return"', 'stages = "flag"'), "rules.stages: 'flag' is not one of 'both', 'return'"),
+        (("time_limit = 30.0", "time_limit = -1.0"), "scenario.time_limit: must be a number in (0, 86400] s, got -1.0"),
         (('id = "defender"', 'id = "attacker"'), "agent id 'attacker' is used twice"),
         (('team = "defender"', 'team = "attacker"'), "needs at least one agent of team 'defender'"),
+        (
+            ('team = "defender"', 'team = "pursuer"'),
+            "agent[1].team: 'pursuer' is not one of 'attacker', 'defender' (the teams of a ctf game)",
+        ),
         (("start = [25.0, 22.0]", "start = [25.0, 99.0]"), "agent[0].start at (25.0, 99.0) is outside the area"),
-        (("start = [25.0, 22.0]", "start = [25.0]"), "agent[0].start must be [east, north]"),
-        (('name = "test-game"', 'name = "a game"'), "scenario.name 'a game' must be"),
-        (("[rules]", "[rulez]"), "rulez is not a known key"),
+        (("start = [25.0, 22.0]", "start = [25.0]"), "agent[0].start: must be [east, north] in metres, got [25.0]"),
+        (
+            ('name = "test-game"', 'name = "a game"'),
+            "scenario.name: must be 1 to 64 letters, digits, '-' or '_', got 'a game'",
+        ),
+        (("[rules]", "[rulez]"), "unknown key 'rulez'; the keys there are scenario, agent, rules, guidance, uav"),
+        (
+            ("capture_radius = 2.5", "capture_radious = 2.5"),
+            "rules: unknown key 'capture_radious'; the keys there are capture_radius,",
+        ),
+        (('behaviour = "fake-out"', 'behavior = "fake-out"'), "agent[0].behaviour: must be given, as one of"),
     ],
 )
 def test_a_mistake_names_the_file_and_the_key(change, culprit):
@@ -42,13 +61,110 @@ def test_a_mistake_names_the_file_and_the_key(change, culprit):
     assert str(error.value).startswith("game.toml: ") and culprit in str(error.value)
 
 
+@pytest.mark.parametrize(
+    "change, culprit",
+    [
+        # Once a ZeroDivisionError.
+        (
+            ("capture_radius = 2.5", "capture_radius = 0"),
+            "rules.capture_radius: must be a number in (0, 1000] m, got 0",
+        ),
+        # Once an overflowing solve cached as converged, after which every run crashed.
+        (("speed = 3.0", "speed = 1e300"), "agent[0].speed: must be a number in (0, 15] m/s, got 1e+300"),
+        # Once a hang of simulate.
+        (
+            ("[rules]", "[guidance]\nrate = 1e9\n[rules]"),
+            "guidance.rate: must be a number in [0.01, 50] Hz, got 1000000000.0",
+        ),
+        # Once a TypeError.
+        (("seed = 3", "seed = 3\ndead_zones = 5"), "scenario.dead_zones: must be a list of polygons of [east, north]"),
+        (
+            ("seed = 3", "seed = 3\ndead_zones = [[[0, 0], [1, 1]]]"),
+            "scenario.dead_zones[0]: must be a polygon of at least 3 [east, north] points, got [[0, 0], [1, 1]]",
+        ),
+        (
+            ("seed = 3", "seed = 3\ndead_zones = [[[0, 0], [9, 9], [9, 0], [0, 9]]]"),
+            "scenario.dead_zones[0] is not a valid polygon (Self-intersection",
+        ),
+        (("speed = 3.0", "speed = nan"), "agent[0].speed: must be a number in (0, 15] m/s, got nan"),
+        (("speed = 3.0", "speed = true"), "agent[0].speed: must be a number in (0, 15] m/s, got true"),
+        (("time_limit = 30.0", "time_limit = inf"), "scenario.time_limit: must be a number in (0, 86400] s, got inf"),
+        (("return_time = 60.0", "return_time = 0.0"), "rules.return_time: must be a number in (0, 3600] s, got 0.0"),
+        (("seed = 3", "seed = -1"), "scenario.seed: must be an integer of at least 0, got -1"),
+        (("aided = true", "aided = true\nfix_rate = 0"), "agent[0].fix_rate: must be a number in [0.01, 50] Hz, got 0"),
+        (
+            ("aided = true", "aided = true\nreaction = -0.1"),
+            "agent[0].reaction: must be a number in [0, 10] s, got -0.1",
+        ),
+        (
+            ("aided = true", "aided = true\nheading_error = 400"),
+            "agent[0].heading_error: must be a number in [0, 180] degrees, got 400",
+        ),
+        (
+            ("aided = true", "aided = true\noptions = { turn_every = 0 }"),
+            "agent[0].options.turn_every: must be a number in (0, 600] s, got 0",
+        ),
+        (
+            ("aided = false", "aided = false\noptions = { share = 1.5 }"),
+            "agent[1].options.share: must be a number in [0, 1], got 1.5",
+        ),
+        (
+            ("start = [25.0, 22.0]", "start = [25.0, inf]"),
+            "agent[0].start[1]: must be a number in [-1e7, 1e7] m, got inf",
+        ),
+    ],
+)
+def test_every_number_has_its_bounds(change, culprit):
+    text = scenario_text().replace(*change, 1)
+    assert text != scenario_text()
+    with pytest.raises(ScenarioError) as error:
+        parse_scenario(text, source="game.toml")
+    assert str(error.value).startswith(f"game.toml: {culprit}")
+
+
 def test_options_of_a_behaviour_are_checked():
     text = scenario_text(attacker_behaviour="go-no-go")
-    with pytest.raises(ScenarioError, match=r"agent\[0\].options.hold is required by behaviour 'go-no-go'"):
+    with pytest.raises(ScenarioError, match=r"agent\[0\].options: must be given, as a table with 'hold'$"):
         parse_scenario(text, source="game.toml")
     text = text.replace("aided = true", "aided = true\noptions = { hold = [20.0, 20.0], wait = 3 }", 1)
-    with pytest.raises(ScenarioError, match=r"agent\[0\].options.wait is not a known key"):
+    with pytest.raises(ScenarioError, match=r"agent\[0\].options: unknown key 'wait'; the keys there are hold, fresh"):
         parse_scenario(text, source="game.toml")
+
+
+@pytest.mark.parametrize(
+    "hold, culprit",
+    [
+        ("[100.0, 100.0]", "agent[0].options.hold at (100.0, 100.0) is inside obstacle 'hall' of map campus-200"),
+        ("[58.0, 300.0]", "agent[0].options.hold at (58.0, 300.0) is outside the area of map campus-200"),
+    ],
+)
+def test_a_hold_point_is_refused_where_a_waypoint_would_be(hold, culprit):
+    text = load_scenario("go-no-go").text
+    assert "hold = [58.0, 80.0]" in text
+    with pytest.raises(ScenarioError) as error:
+        parse_scenario(text.replace("hold = [58.0, 80.0]", f"hold = {hold}"), source="go-no-go.toml")
+    assert str(error.value) == f"go-no-go.toml: {culprit}"
+    waypoint = text.replace("[140.0, 145.0]", hold)
+    with pytest.raises(ScenarioError, match=r"agent\[1\].options.points\[1\] at .* of map campus-200"):
+        parse_scenario(waypoint, source="go-no-go.toml")
+
+
+def test_a_spacing_must_make_a_grid_of_the_map():
+    text = load_scenario("open-loop").text
+    assert "spacing = 2.0" in text
+    with pytest.raises(ScenarioError, match=r"^open-loop.toml: rules.spacing: 0.01 m makes \d+ cells across map"):
+        parse_scenario(text.replace("spacing = 2.0", "spacing = 0.01"), source="open-loop.toml")
+
+
+def test_a_file_that_is_not_utf8_or_nests_too_deeply_is_named(tmp_path):
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(scenario_text().replace("test-game", "caf\xe9").encode("latin-1"))
+    with pytest.raises(ScenarioError, match=rf"^{latin} is not UTF-8 text \(byte \d+ is 0xe9\)$"):
+        load_scenario(latin)
+    deep = tmp_path / "deep.toml"
+    deep.write_text("x = " + "[" * 100_000 + "]" * 100_000 + "\n")
+    with pytest.raises(ScenarioError, match=rf"^{deep} nests arrays or tables too deeply to be a scenario$"):
+        load_scenario(deep)
 
 
 def test_an_unknown_scenario_is_named(tmp_path):

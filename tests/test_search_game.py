@@ -8,6 +8,7 @@ from __future__ import annotations
 import math
 from dataclasses import replace
 
+import msgspec
 import numpy as np
 import pytest
 
@@ -36,7 +37,7 @@ def test_the_possible_set_always_holds_the_defender_while_it_is_unseen(scenario,
     """Checked against the truth ten times a second: wherever the defender
     really is, P_D has a node within a cell, plus the metres the defender
     walks in the second a fix may be old (sensing runs on fixes)."""
-    scenario = replace(scenario, uavs=tuple(replace(u, search=search) for u in scenario.uavs))
+    scenario = replace(scenario, uavs=tuple(msgspec.structs.replace(u, search=search) for u in scenario.uavs))
     checked, seen_updates = [], {"n": -1}
 
     def inspect(now, players):
@@ -112,17 +113,21 @@ def test_the_uav_climbs_searches_once_a_second_and_its_camera_finds_the_defender
 
 def test_uav_tables_are_checked_key_by_key():
     with pytest.raises(
-        ScenarioError, match=r"uav\[0\]\.search 'random' is not one of reachability, lawnmower, nearest"
+        ScenarioError, match=r"uav\[0\]\.search: 'random' is not one of 'lawnmower', 'nearest', 'reachability'$"
     ):
         parse_scenario(_text(**{'search = "reachability"': 'search = "random"'}), source="s.toml")
-    with pytest.raises(ScenarioError, match=r"uav\[0\]\.start \[300.0, 12.0\] is off map campus-250x200"):
+    with pytest.raises(ScenarioError, match=r"uav\[0\]\.start: \[300.0, 12.0\] is off map campus-250x200"):
         parse_scenario(_text(**{"start = [125.0, 12.0]": "start = [300.0, 12.0]"}), source="s.toml")
-    with pytest.raises(ScenarioError, match=r"uav\[0\]\.camera is not a known key"):
+    with pytest.raises(ScenarioError, match=r"uav\[0\]: unknown key 'camera'; the keys there are id, team, start"):
         parse_scenario(_text(**{"camera_radius = 15.0": "camera = 15.0"}), source="s.toml")
     with pytest.raises(ScenarioError, match=r"agent id 'attacker' is used twice"):
         parse_scenario(_text(**{'id = "q1"': 'id = "attacker"'}), source="s.toml")
-    with pytest.raises(ScenarioError, match=r"rules.visibility 'none' is not one of full, line-of-sight"):
+    with pytest.raises(ScenarioError, match=r"rules.visibility: 'none' is not one of 'full', 'line-of-sight'$"):
         parse_scenario(_text(**{'visibility = "line-of-sight"': 'visibility = "none"'}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"uav\[0\]\.speed: must be a number in \(0, 40\] m/s, got 1e\+300$"):
+        parse_scenario(_text(**{"speed = 8.0": "speed = 1e300"}), source="s.toml")
+    with pytest.raises(ScenarioError, match=r"uav\[0\]\.altitude: must be a number in \(0, 500\] m, got -5.0$"):
+        parse_scenario(_text(**{"altitude = 20.0": "altitude = -5.0"}), source="s.toml")
 
 
 def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario):

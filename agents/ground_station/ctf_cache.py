@@ -10,6 +10,12 @@ precision, the file format and the package version; W_A's key includes R_A's.
 So two games that share a flag-return stage share its file, and any change
 to the inputs misses the cache rather than loading a stale answer. The
 directory is safe to delete; a damaged entry is logged and solved again.
+
+A set whose value holds NaN or infinities (a solver that overflowed), or
+whose time-to-win holds NaN or negative times, is never stored or handed
+out: a solve that gives one raises an InputError naming the game, and such
+an entry already on disk (written before this check) counts as damaged and
+is solved again, since the cache holds nothing a new solve cannot restore.
 """
 
 from __future__ import annotations
@@ -30,6 +36,7 @@ from bearcat.maps import Map
 from bearcat.maps.ctf import ctf_geometry
 from bearcat.maps.geojson import dumps
 from bearcat.solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
+from bearcat.solvers.errors import InputError
 
 log = logging.getLogger(__name__)
 
@@ -155,10 +162,31 @@ def load_or_solve(
     )
     for name, solved in solution.sets.items():
         if name not in known:
+            flaw = _flaw(solved.value, solved.time_to_win)
+            if flaw is not None:
+                r = game.rules
+                raise InputError(
+                    f"solving set {name!r} on map {game.map.name} gave a set whose {flaw}, so it is neither cached "
+                    f"nor used: speeds {r.attacker_speed:g} and {r.defender_speed:g} m/s, capture radius "
+                    f"{r.capture_radius:g} m and horizons {r.capture_time:g} and {r.return_time:g} s on a "
+                    f"{game.grid_points}-point grid are beyond what the solver resolves"
+                )
             sources[name] = "solved"
             if use_cache:
                 _store(paths[name], solved)
     return Solved(solution, sources, paths)
+
+
+def _flaw(value: np.ndarray, time_to_win: np.ndarray | None) -> str | None:
+    """What makes a set unusable, or None: a value that is not finite
+    everywhere, a time-to-win with NaN or below zero (inf is "never").
+    Reductions, not masks, so a memory-mapped set is read once without a copy."""
+    low, high = float(np.min(value)), float(np.max(value))
+    if not (math.isfinite(low) and math.isfinite(high)):
+        return "value holds NaN or infinite numbers"
+    if time_to_win is not None and not float(np.min(time_to_win)) >= 0:
+        return "time-to-win holds NaN or negative times"
+    return None
 
 
 def _version() -> str:
@@ -179,6 +207,9 @@ def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
         for array in (value, time_to_win):
             if array.shape != shape:
                 raise ValueError(f"shape {array.shape}, expected {shape}")
+        flaw = _flaw(value, time_to_win)
+        if flaw is not None:
+            raise ValueError(f"its {flaw}")
         return SetSolution(
             meta["name"],
             value,

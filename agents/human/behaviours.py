@@ -22,6 +22,9 @@ direction (east, north) or None to stand still.
   between its points at random, while no opponent is in sight; play
   ``direct`` against one seen in the last ``memory`` seconds.
 - ``keyboard``: arrow keys or WASD set the direction; the runtime feeds keys.
+
+The options and their defaults are the scenario schema's (scenarios/schema.py);
+``make`` passes them all, so the constructors declare none.
 """
 
 from __future__ import annotations
@@ -29,6 +32,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+import msgspec
 import numpy as np
 import shapely
 import shapely.ops
@@ -61,10 +65,10 @@ class FollowGuidance:
         return _around(me, screen.heading, situation.forbidden)
 
 
-class Direct:
-    """Unaided play. An attacker goes for its goal along the shortest path;
-    an evader runs from the pursuers it sees, nearest first; a pursuer runs
-    straight at the evader.
+class Unaided:
+    """Unaided play, the scenario's ``direct``. An attacker goes for its goal
+    along the shortest path; an evader runs from the pursuers it sees,
+    nearest first; a pursuer runs straight at the evader.
     A defender marks the attacker as displayed, anticipating it: it takes
     the attacker ``lead`` seconds ahead on its course (read from its last two
     displayed positions) and keeps to the straight run from there to the
@@ -76,7 +80,7 @@ class Direct:
 
     name = "direct"
 
-    def __init__(self, standoff: float = 6.0, share: float = 0.5, lead: float = 1.5) -> None:
+    def __init__(self, standoff: float, share: float, lead: float) -> None:
         self.standoff = standoff
         self.share = share
         self.lead = lead
@@ -125,9 +129,7 @@ class FakeOut:
 
     name = "fake-out"
 
-    def __init__(
-        self, rng: np.random.Generator, turn_every: float = 1.5, spread: float = 100.0, margin: float = 0.0
-    ) -> None:
+    def __init__(self, rng: np.random.Generator, turn_every: float, spread: float, margin: float) -> None:
         self.rng = rng
         self.margin = margin
         self.turn_every = turn_every
@@ -169,7 +171,7 @@ class GoNoGo:
 
     name = "go-no-go"
 
-    def __init__(self, hold, fresh: float = 2.0, margin: float = 0.0, flee: float = 0.0) -> None:
+    def __init__(self, hold, fresh: float, margin: float, flee: float) -> None:
         self.hold = np.asarray(hold, float)
         self.fresh = float(fresh)
         self.margin = float(margin)
@@ -199,7 +201,7 @@ class GoNoGo:
 class Waypoints:
     name = "waypoints"
 
-    def __init__(self, points, loop: bool = False) -> None:
+    def __init__(self, points, loop: bool) -> None:
         self.points = [np.asarray(p, float) for p in points]
         self.loop = loop
         self.index = 0
@@ -219,21 +221,21 @@ class Waypoints:
 class Patrol:
     """Walk the ``points`` in turn (or, with ``wander``, each next one drawn
     at random among the others, so the route cannot be learnt) until an
-    opponent is on the screen; then play ``direct``."""
+    opponent is on the screen; then play unaided (``direct``)."""
 
     name = "patrol"
 
-    def __init__(self, points, rng: np.random.Generator, memory: float = 5.0, wander: bool = False, **direct) -> None:
+    def __init__(self, points, rng: np.random.Generator, memory: float, wander: bool, **unaided) -> None:
         self.points = [np.asarray(p, float) for p in points]
         self.rng = rng
         self.wander = wander
-        self.direct = Direct(**direct)
+        self.unaided = Unaided(**unaided)
         self.memory = float(memory)
         self.index = int(rng.integers(len(self.points))) if wander else 0
 
     def decide(self, now, me, screen, situation):
         if any(screen.age(o, now) <= self.memory for o in situation.opponents):
-            return self.direct.decide(now, me, screen, situation)
+            return self.unaided.decide(now, me, screen, situation)
         if np.hypot(*(self.points[self.index] - me)) <= ARRIVED:
             self.index = self._next()
         return situation.navigator.toward(tuple(self.points[self.index]), me)
@@ -278,12 +280,13 @@ class Keyboard:
         return self.direction
 
 
-def make(name: str, options: dict, rng: np.random.Generator):
-    """The behaviour ``name`` with the scenario's ``options``."""
+def make(name: str, options: msgspec.Struct, rng: np.random.Generator):
+    """The behaviour ``name`` with the scenario's ``options`` (a Struct of the schema)."""
+    options = msgspec.structs.asdict(options)
     if name == "follow-guidance":
         return FollowGuidance()
     if name == "direct":
-        return Direct(**options)
+        return Unaided(**options)
     if name == "fake-out":
         return FakeOut(rng, **options)
     if name == "go-no-go":
