@@ -37,8 +37,8 @@ class Output:
         print(text, file=self.human, flush=True)
 
     def json(self, data, *, indent: int | None = 2) -> None:
-        """Write ``data`` where ``--json`` asked; ``indent=None`` gives one
-        line, for a stream of objects (JSON Lines)."""
+        """Write ``data`` where ``--json`` asked, if it was; ``indent=None``
+        gives one line, for a stream of objects (JSON Lines)."""
         text = json.dumps(data, indent=indent)
         if self.json_on_stdout:
             print(text, flush=True)

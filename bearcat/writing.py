@@ -7,8 +7,9 @@ it into a ``WriteError`` naming the place and the reason. Any other
 ``OSError`` in the same block keeps its traceback, since it points at a bug:
 the error must name the place (or a file in it, or a parent of it), or carry
 no name at all and be one of the disk's refusals, which writes through an
-open file raise without a name. So a guard encloses code that writes to its
-place only, and not to another that could fill up too.
+open file raise without a name, or a short write a library reports without
+the OS's error number (numpy's ``tofile`` does). So a guard encloses code
+that writes to its place only, and not to another that could fill up too.
 """
 
 from __future__ import annotations
@@ -42,7 +43,7 @@ def writing(place: Path | str, what: str) -> Iterator[None]:
 
 def _concerns(exc: OSError, place: Path) -> bool:
     if exc.filename is None:
-        return exc.errno in DISK_REFUSALS
+        return exc.errno is None or exc.errno in DISK_REFUSALS
     named = Path(os.fsdecode(exc.filename)).absolute()
     place = place.absolute()
     return named == place or place in named.parents or named in place.parents
@@ -56,6 +57,8 @@ def _reason(exc: OSError, place: Path) -> str:
                 if not step.is_dir():
                     return f"{step} is a file, not a directory"
                 break
+    if exc.errno is None:
+        return f"a write stopped short ({exc}); is its disk full?"
     return exc.strerror or str(exc)
 
 
