@@ -54,3 +54,25 @@ def non_negative(text: str) -> float:
     if not (math.isfinite(value) and value >= 0):
         raise argparse.ArgumentTypeError(f"{text!r} must be a finite number at or above zero")
     return value
+
+
+#: The largest seed: numpy's classic 32-bit seed range, which every random
+#: stream of a run is spawned from and a peer's command line carries.
+MAX_SEED = 2**32 - 1
+
+
+def seed(text: str) -> int:
+    """A whole number from 0 to ``MAX_SEED``."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"seed {text!r} is not a whole number") from None
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"seed {text!r} is not between 0 and {MAX_SEED}")
+    return value
+
+
+def check_seeds(first: int, count: int) -> None:
+    """Seeds ``first`` to ``first + count - 1`` must all be seeds."""
+    if first + count - 1 > MAX_SEED:
+        raise UsageError(f"--seed {first} with {count} trials runs past the largest seed, {MAX_SEED}")

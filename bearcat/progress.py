@@ -1,30 +1,53 @@
-"""Progress bars on stderr for solves that the field commands set off."""
+"""The progress bars every command draws, on stderr so stdout stays the command's output.
+
+Two kinds: ``solve_bars`` for the capture-the-flag sets a command solves
+(in seconds of game time, one bar per set), and ``counting`` for a batch of
+games or trials.
+"""
 
 from __future__ import annotations
 
 import sys
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 
 
 def solve_bars():
-    """A ``progress(name, t, horizon, change)`` callback drawing one bar per
-    solved set, in seconds of game time; ``progress.close()`` closes the bars
-    of sets that converged before their horizon."""
+    """A ``progress(name, t, horizon, change)`` callback, as the capture-the-flag
+    solver calls it, that draws one bar per set being solved. A set's bar
+    closes when the next set starts or at its horizon; ``progress.close()``
+    closes the bar of a set that converged before its horizon."""
     from tqdm import tqdm
+
+    from bearcat.solvers.ctf import SET_NAMES
 
     bars: dict = {}
 
-    def update(name, t, horizon, change):
+    def update(name: str, t: float, horizon: float, change: float) -> None:
         bar = bars.get(name)
         if bar is None:
+            update.close()
             bar = bars[name] = tqdm(
                 total=round(horizon, 2),
-                desc=f"solving the {name} set",
+                desc=f"solving {SET_NAMES[name]} ({name} set)",
                 file=sys.stderr,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s of game time [{elapsed}]",
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s of game time "
+                "[{elapsed}<{remaining}{postfix}]",
             )
         bar.update(round(t - bar.n, 2))
+        bar.set_postfix_str(f"change {change:.3g} m")
         if t >= horizon - 1e-9:
             bar.close()
 
     update.close = lambda: [bar.close() for bar in bars.values()]
     return update
+
+
+@contextmanager
+def counting(total: int, what: str, unit: str) -> Iterator[Callable[..., None]]:
+    """A bar over ``total`` tasks; the block calls what it yields once per
+    finished task (with any arguments, so it fits as a result callback)."""
+    from tqdm import tqdm
+
+    with tqdm(total=total, desc=what, unit=unit, file=sys.stderr) as bar:
+        yield lambda *_: bar.update(1)

@@ -15,6 +15,7 @@ any game can be replayed with ``bearcat simulate SCENARIO --seed S --netem P``.
 
 from __future__ import annotations
 
+import statistics
 from collections import defaultdict
 
 STUDIES = {
@@ -141,7 +142,7 @@ def summarise_search(results) -> list[dict]:
                 "games": len(games),
                 "found": len(found),
                 "median_time_to_find": _median(found),
-                "mean_time_to_find": round(sum(found) / len(found), 2) if found else None,
+                "mean_time_to_find": round(statistics.fmean(found), 2) if found else None,
                 "attacker_wins": wins,
                 "attacker_win_rate": round(wins / len(games), 3),
                 "win_rate_95": [round(low, 3), round(high, 3)],
@@ -150,21 +151,15 @@ def summarise_search(results) -> list[dict]:
     return rows
 
 
-def wilson(successes: int, trials: int, z: float = 1.96) -> tuple[float, float]:
-    """The Wilson score interval of a rate (95 % by default): games are
-    chaotic enough that a different network draw turns many of them, so a
-    rate from 50 games is only good to about +-14 %."""
-    if trials == 0:
-        return 0.0, 1.0
-    p = successes / trials
-    centre = (p + z * z / (2 * trials)) / (1 + z * z / trials)
-    half = z * ((p * (1 - p) / trials + z * z / (4 * trials * trials)) ** 0.5) / (1 + z * z / trials)
-    return max(0.0, centre - half), min(1.0, centre + half)
+def wilson(successes: int, trials: int) -> tuple[float, float]:
+    """The 95 % Wilson score interval of a rate: games are chaotic enough
+    that a different network draw turns many of them, so a rate from 50
+    games is only good to about +-14 %."""
+    from scipy.stats import binomtest
+
+    interval = binomtest(successes, trials).proportion_ci(confidence_level=0.95, method="wilson")
+    return float(interval.low), float(interval.high)
 
 
-def _median(values):
-    values = sorted(v for v in values if v is not None)
-    if not values:
-        return None
-    mid = len(values) // 2
-    return round(values[mid] if len(values) % 2 else 0.5 * (values[mid - 1] + values[mid]), 2)
+def _median(values: list[float]) -> float | None:
+    return round(statistics.median(values), 2) if values else None

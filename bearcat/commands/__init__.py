@@ -1,1 +1,2 @@
-"""One module per top-level subcommand; each exposes ``register(subparsers)``."""
+"""The commands' modules; each exposes ``register(subparsers)``, and
+``bearcat.cli.COMMANDS`` says which module holds which command."""

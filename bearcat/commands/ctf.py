@@ -8,8 +8,6 @@ is solved once and then queried and played in milliseconds.
 from __future__ import annotations
 
 import argparse
-import json
-import sys
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -25,10 +23,13 @@ from bearcat.agents.ground_station.ctf_cache import (
 )
 from bearcat.maps import load_map
 from bearcat.maps.geodesy import bearing
+from bearcat.output import Output, add_json_option
+from bearcat.progress import solve_bars
 from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
 from bearcat.solvers.ctf_playout import play
 from bearcat.solvers.ctf_queries import CtfQueries
 from bearcat.solvers.hji import SCHEMES
+from bearcat.writing import writing
 
 DEFAULT_GRID = 45
 
@@ -108,13 +109,13 @@ def register_solve(games) -> None:
         "(thesis 3.3) on a map and cache them on disk.",
     )
     add_game_options(parser)
-    parser.add_argument("--json", type=Path, metavar="FILE", help="write a summary as JSON ('-' for stdout)")
+    add_json_option(parser, "a summary")
     parser.set_defaults(run=run_solve)
 
 
 def register(subparsers) -> None:
     """``query ctf`` and ``play ctf``."""
-    query = subparsers.add_parser("query", help="ask a solved game about a state")
+    query = subparsers.add_parser("query")
     query_games = query.add_subparsers(dest="game", metavar="GAME", required=True)
     q = query_games.add_parser(
         "ctf",
@@ -130,17 +131,10 @@ def register(subparsers) -> None:
         help="capture: the attacker has not taken the flag; return: it has (default: the first stage solved)",
     )
     q.add_argument("--plot", type=Path, metavar="PNG", help="draw the state and both players' opponent regions")
-    q.add_argument(
-        "--json",
-        type=Path,
-        nargs="?",
-        const=Path("-"),
-        metavar="FILE",
-        help="write the answer as JSON (to stdout without FILE)",
-    )
+    add_json_option(q, "the answer")
     q.set_defaults(run=run_query)
 
-    playing = subparsers.add_parser("play", help="play a solved game out in closed loop")
+    playing = subparsers.add_parser("play")
     play_games = playing.add_subparsers(dest="game", metavar="GAME", required=True)
     p = play_games.add_parser(
         "ctf",
@@ -151,14 +145,7 @@ def register(subparsers) -> None:
     add_game_options(p)
     _add_state_options(p)
     p.add_argument("--plot", type=Path, metavar="PNG", help="draw the start's winning region and both tracks")
-    p.add_argument(
-        "--json",
-        type=Path,
-        nargs="?",
-        const=Path("-"),
-        metavar="FILE",
-        help="write the tracks and outcome as JSON (to stdout without FILE)",
-    )
+    add_json_option(p, "the tracks and outcome")
     p.set_defaults(run=run_play)
 
 
@@ -192,36 +179,17 @@ def solve_game(args) -> tuple[CtfGame, Solved, float]:
     """Load or solve the game the options name, with a progress bar on stderr
     for sets being solved. Positions given on the command line are checked
     against the map first, so a typo costs no solve."""
-    from tqdm import tqdm
-
     game = game_from_args(args)
     for who in ("attacker", "defender"):
         if getattr(args, who, None) is not None:
             game.map.check_position(getattr(args, who), who)
-    bars: dict[str, tqdm] = {}
-
-    def progress(name: str, t: float, horizon: float, change: float) -> None:
-        bar = bars.get(name)
-        if bar is None:
-            for finished in bars.values():
-                finished.close()
-            bar = bars[name] = tqdm(
-                total=round(horizon, 2),
-                desc=f"{SET_NAMES[name]} ",
-                unit="s",
-                file=sys.stderr,
-                bar_format="{desc}{percentage:3.0f}%|{bar}| {n:.1f}/{total:.1f} s game time "
-                "[{elapsed}<{remaining}{postfix}]",
-            )
-        bar.update(round(t - bar.n, 2))
-        bar.set_postfix_str(f"change {change:.3g} m")
-
+    progress = solve_bars()
     started = time.perf_counter()
     try:
-        solved = load_or_solve(game, args.stages, use_cache=not args.no_cache, progress=progress)
+        with writing(cache_root(), "cache directory"):
+            solved = load_or_solve(game, args.stages, use_cache=not args.no_cache, progress=progress)
     finally:
-        for bar in bars.values():
-            bar.close()
+        progress.close()
     return game, solved, time.perf_counter() - started
 
 
@@ -247,9 +215,10 @@ def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
 
 
 def run_solve(args) -> int:
+    out = Output(args.json)
     game, solved, seconds = solve_game(args)
     rules, n = game.rules, game.grid_points
-    print(
+    out.say(
         f"capture-the-flag on {game.map.name}: {n}^4 = {n**4:,} joint states, {game.scheme}, "
         f"speeds {rules.attacker_speed:g}/{rules.defender_speed:g} m/s, capture radius {rules.capture_radius:g} m"
     )
@@ -264,22 +233,20 @@ def run_solve(args) -> int:
                 f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
                 f"{row['horizon_s']:g} s game; longer stage times approach the unlimited one"
             )
-        print(
+        out.say(
             f"{row['set']}: attacker wins from {100 * row['attacker_wins_fraction']:.1f}% of free joint states; {how}"
         )
-    print(f"{seconds:.2f} s wall; cache {cache_root()}")
-    if args.json is not None:
-        _write_json(
-            args.json,
-            {
-                "map": game.map.name,
-                "grid": n,
-                "scheme": game.scheme,
-                "rules": asdict(rules),
-                "sets": rows,
-                "seconds": round(seconds, 3),
-            },
-        )
+    out.say(f"{seconds:.2f} s wall; cache {cache_root()}")
+    out.json(
+        {
+            "map": game.map.name,
+            "grid": n,
+            "scheme": game.scheme,
+            "rules": asdict(rules),
+            "sets": rows,
+            "seconds": round(seconds, 3),
+        },
+    )
     return 0
 
 
@@ -291,6 +258,7 @@ def bearing_deg(heading) -> float | None:
 
 
 def run_query(args) -> int:
+    out = Output(args.json)
     game, solved, _seconds = solve_game(args)
     guidance = CtfQueries(solved.solution)
     phase = args.phase or ("return" if args.stages == "return" else "capture")
@@ -313,65 +281,62 @@ def run_query(args) -> int:
         "defender_region_area_m2": round(defender_polygons.area, 2),
         "attacker_region_area_m2": round(attacker_polygons.area, 2),
     }
-    print(
+    out.say(
         f"{report.winner} wins ({name}, {phase} phase): value {report.value:+.3f} m "
         f"({'attacker margin' if report.value <= 0 else 'defender margin'} {abs(report.value):.3f} m)"
     )
     for who in ("attacker", "defender"):
         h = answer[f"{who}_heading"]
         text = "none (the value is flat here)" if h is None else f"{h['bearing_deg']:.1f} deg from north"
-        print(f"{who} optimal heading: {text}")
-    print(
+        out.say(f"{who} optimal heading: {text}")
+    out.say(
         f"defender's winning region for this attacker position: {answer['defender_region_area_m2']:.1f} m^2; "
         f"attacker's for this defender position: {answer['attacker_region_area_m2']:.1f} m^2"
     )
-    if args.json is not None:
+    if out.wants_json:
         answer["regions"] = {
             "defender": _polygons_json(defender_polygons),
             "attacker": _polygons_json(attacker_polygons),
         }
-        _write_json(args.json, answer)
+        out.json(answer)
     if args.plot is not None:
         from bearcat.figures import ctf_query_figure
 
         fig = ctf_query_figure(
             game.map, guidance, args.attacker, args.defender, report, phase, defender_values, attacker_values, name
         )
-        fig.savefig(args.plot, dpi=110)
-        print(f"wrote {args.plot}")
+        out.figure(fig, args.plot, dpi=110)
     return 0
 
 
 def run_play(args) -> int:
+    out = Output(args.json)
     game, solved, _ = solve_game(args)
     guidance = CtfQueries(solved.solution)
     outcome = play(guidance, args.attacker, args.defender)
     start = guidance.evaluate(args.attacker, args.defender, outcome.phases[0])
-    print(f"start: value {start.value:+.3f} m, {start.winner} predicted to win")
+    out.say(f"start: value {start.value:+.3f} m, {start.winner} predicted to win")
     flag = "" if outcome.flag_time is None else f", flag taken at {outcome.flag_time:.2f} s"
-    print(f"{outcome.winner} won ({outcome.reason}) after {outcome.duration:.2f} s{flag}")
-    if args.json is not None:
-        _write_json(
-            args.json,
-            {
-                "map": game.map.name,
-                "predicted_winner": start.winner,
-                "value_m": round(start.value, 4),
-                "winner": outcome.winner,
-                "reason": outcome.reason,
-                "duration_s": round(outcome.duration, 3),
-                "flag_time_s": None if outcome.flag_time is None else round(outcome.flag_time, 3),
-                "times_s": [round(float(t), 3) for t in outcome.times],
-                "attacker": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.attacker],
-                "defender": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.defender],
-            },
-        )
+    out.say(f"{outcome.winner} won ({outcome.reason}) after {outcome.duration:.2f} s{flag}")
+    out.json(
+        {
+            "map": game.map.name,
+            "predicted_winner": start.winner,
+            "value_m": round(start.value, 4),
+            "winner": outcome.winner,
+            "reason": outcome.reason,
+            "duration_s": round(outcome.duration, 3),
+            "flag_time_s": None if outcome.flag_time is None else round(outcome.flag_time, 3),
+            "times_s": [round(float(t), 3) for t in outcome.times],
+            "attacker": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.attacker],
+            "defender": [[round(float(x), 3), round(float(y), 3)] for x, y in outcome.defender],
+        },
+    )
     if args.plot is not None:
         from bearcat.figures import ctf_play_figure
 
         fig = ctf_play_figure(game.map, guidance, outcome, start)
-        fig.savefig(args.plot, dpi=110)
-        print(f"wrote {args.plot}")
+        out.figure(fig, args.plot, dpi=110)
     return 0
 
 
@@ -387,12 +352,3 @@ def _polygons_json(shape) -> list:
         [[[round(x, 3), round(y, 3)] for x, y in ring.coords] for ring in (p.exterior, *p.interiors)]
         for p in shape.geoms
     ]
-
-
-def _write_json(target: Path, data: dict) -> None:
-    text = json.dumps(data, indent=2)
-    if str(target) == "-":
-        print(text)
-    else:
-        target.write_text(text + "\n")
-        print(f"wrote {target}")

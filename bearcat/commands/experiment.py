@@ -12,20 +12,22 @@ resumable batch, written to a run directory:
 from __future__ import annotations
 
 import json
-import sys
 from dataclasses import asdict
 from pathlib import Path
 
 from bearcat import arguments
 from bearcat.maps import list_maps
+from bearcat.output import Output
+from bearcat.progress import counting
 from bearcat.scenarios.batch import BatchInterrupted, run_batch
 from bearcat.scenarios.pursuit_experiment import PursuitSetup, run_trial, summarise, trial_tasks
+from bearcat.writing import writing
 
 DEFAULT_DOMAINS = ("square-10", "triangle-10", "maze-10")
 
 
 def register(subparsers) -> None:
-    experiment = subparsers.add_parser("experiment", help="run a batch of trials")
+    experiment = subparsers.add_parser("experiment")
     kinds = experiment.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
     p = kinds.add_parser(
         "pursuit",
@@ -47,7 +49,7 @@ def register(subparsers) -> None:
     p.add_argument(
         "--trials", type=int, default=500, metavar="K", help="trials per domain and pursuer count (default 500)"
     )
-    p.add_argument("--seed", type=int, default=0, help="seed of the whole run (default 0)")
+    p.add_argument("--seed", type=arguments.seed, default=0, help="seed of the whole run (default 0)")
     p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the trials on this Dask cluster instead")
     p.add_argument(
@@ -72,43 +74,48 @@ def register(subparsers) -> None:
         default=PursuitSetup.gradient,
         help="area gradient in non-convex domains (default boundary)",
     )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the table (DIR/table.json) as JSON and nothing else on stdout (the text goes to stderr)",
+    )
     p.set_defaults(run=run_pursuit)
 
 
 def run_pursuit(args) -> int:
-    from tqdm import tqdm
-
     unknown = [d for d in args.domain if d not in list_maps()]
     if unknown:
         raise arguments.UsageError(f"unknown domain {unknown[0]!r}; built-in maps are {', '.join(list_maps())}")
     if args.trials < 1 or any(n < 1 for n in args.pursuers):
         raise arguments.UsageError("--trials and every --pursuers count must be at least 1")
+    report = Output(args.json)
     setup = PursuitSetup(dt=args.dt, max_time=args.max_time, gradient=args.gradient)
-    _check_setup(args.out, {"seed": args.seed, **asdict(setup)})
     tasks = trial_tasks(args.domain, args.pursuers, args.trials, args.seed, setup)
-    with tqdm(total=len(tasks), desc="trials", unit="trial", file=sys.stderr) as bar:
-        try:
-            results = run_batch(
-                tasks,
-                run_trial,
-                args.out / "trials.jsonl",
-                workers=args.workers,
-                scheduler=args.scheduler,
-                on_result=lambda _: bar.update(),
-            )
-        except BatchInterrupted as exc:
-            raise arguments.UsageError(str(exc)) from None
-    wanted = {t["key"] for t in tasks}
-    table = summarise([r for k, r in results.items() if k in wanted], args.domain, args.pursuers)
-    (args.out / "table.json").write_text(json.dumps(table, indent=2) + "\n")
-    markdown = table_markdown(table, args.domain, args.pursuers)
-    (args.out / "table.md").write_text(markdown + "\n")
-    print(markdown)
-    from bearcat.figures import pursuit_histograms
+    with writing(args.out, "run directory"):
+        _check_setup(args.out, {"seed": args.seed, **asdict(setup)})
+        with counting(len(tasks), "trials", "trial") as finished:
+            try:
+                results = run_batch(
+                    tasks,
+                    run_trial,
+                    args.out / "trials.jsonl",
+                    workers=args.workers,
+                    scheduler=args.scheduler,
+                    on_result=finished,
+                )
+            except BatchInterrupted as exc:
+                raise arguments.UsageError(str(exc)) from None
+        wanted = {t["key"] for t in tasks}
+        table = summarise([r for k, r in results.items() if k in wanted], args.domain, args.pursuers)
+        (args.out / "table.json").write_text(json.dumps(table, indent=2) + "\n")
+        markdown = table_markdown(table, args.domain, args.pursuers)
+        (args.out / "table.md").write_text(markdown + "\n")
+        from bearcat.figures import pursuit_histograms
 
-    figure = pursuit_histograms(table, args.domain, args.pursuers)
-    figure.savefig(args.out / "histograms.png", dpi=110)
-    print(f"wrote {args.out / 'trials.jsonl'}, table.md, table.json and histograms.png in {args.out}")
+        pursuit_histograms(table, args.domain, args.pursuers).savefig(args.out / "histograms.png", dpi=110)
+    report.say(markdown)
+    report.say(f"wrote {args.out / 'trials.jsonl'}, table.md, table.json and histograms.png in {args.out}")
+    report.json(table)
     return 0
 
 

@@ -2,22 +2,24 @@
 
 from __future__ import annotations
 
+from contextlib import nullcontext
 from pathlib import Path
 
-from bearcat.progress import solve_bars
+from bearcat import arguments
 from bearcat.scenarios.schema import load_scenario
+from bearcat.solve_ahead import solve_ahead
+from bearcat.writing import make_directory, writing
 
 
 def register(subparsers) -> None:
     run = subparsers.add_parser(
         "run",
-        help="play a scenario live: every peer its own process over Zenoh",
         description="Start the ground station and one walker peer per agent as processes on this host, wait "
         "for all of them, start the game, and stop every peer when it ends (or on Ctrl-C, or when a peer dies).",
     )
     run.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
     run.add_argument("--out", type=Path, metavar="DIR", help="run directory (default ./runs/SCENARIO-SEED)")
-    run.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
+    run.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
@@ -25,7 +27,6 @@ def register(subparsers) -> None:
 
     view = subparsers.add_parser(
         "view",
-        help="replay a run's Rerun recording",
         description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing).",
     )
     view.add_argument(
@@ -41,7 +42,6 @@ def register(subparsers) -> None:
 
     peer = subparsers.add_parser(
         "peer",
-        help="start one peer by hand (a person at a keyboard, or against real hardware)",
         description="Start one peer of a scenario: the ground station (referee, guidance and UAV tasking), one "
         "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
     )
@@ -80,7 +80,7 @@ def register(subparsers) -> None:
         default="truth",
         help="what the referee judges on: the simulation's truth (default), or the fixes, for real players",
     )
-    peer.add_argument("--seed", type=int, metavar="S", help="seed (default: the scenario's)")
+    peer.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
     peer.add_argument(
@@ -101,22 +101,18 @@ def register(subparsers) -> None:
 
 
 def run_live(args) -> int:
-    from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import build_cast
     from bearcat.scenarios.launch import launch
 
     scenario = load_scenario(args.scenario)
     seed = scenario.seed if args.seed is None else args.seed
     netem = args.netem or scenario.netem
-    load_profile(netem)
     out = args.out or Path("runs") / f"{scenario.name}-{seed}"
-    # Solve (or load) what the ground station needs here, with progress, so no peer waits on it.
-    progress = solve_bars()
-    build_cast(scenario, load_profile(netem), seed, people=[], ground=True, ctf_progress=progress)
-    progress.close()
-    outcome = launch(
-        scenario, _reference(args.scenario), out, seed=seed, netem=netem, say=lambda text: print(text, flush=True)
-    )
+    make_directory(out, "run directory")
+    solve_ahead(scenario, netem)
+    with writing(out, "run directory"):
+        outcome = launch(
+            scenario, _reference(args.scenario), out, seed=seed, netem=netem, say=lambda text: print(text, flush=True)
+        )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
     print(f"run directory: {out} (events.jsonl, outcome.json, recording.rrd, peers/); replay: bearcat view {out}")
@@ -159,21 +155,24 @@ def run_peer(args) -> int:
         scenario = fetch_scenario(args.scenario[len("zenoh:") :], args.connect)
     else:
         scenario = load_scenario(args.scenario)
-    reason = start_peer(
-        args.role,
-        scenario,
-        args.id,
-        connect=args.connect,
-        listen=args.listen,
-        mode=args.mode,
-        judge=args.judge,
-        seed=scenario.seed if args.seed is None else args.seed,
-        netem=args.netem or scenario.netem,
-        out=args.out,
-        vehicle=args.vehicle,
-        sysid=args.sysid,
-        emulated=args.emulated,
-    )
+    if args.role == "ground-station":
+        solve_ahead(scenario, args.netem or scenario.netem)
+    with nullcontext() if args.out is None else writing(args.out, "run directory"):
+        reason = start_peer(
+            args.role,
+            scenario,
+            args.id,
+            connect=args.connect,
+            listen=args.listen,
+            mode=args.mode,
+            judge=args.judge,
+            seed=scenario.seed if args.seed is None else args.seed,
+            netem=args.netem or scenario.netem,
+            out=args.out,
+            vehicle=args.vehicle,
+            sysid=args.sysid,
+            emulated=args.emulated,
+        )
     print(f"peer {args.id if args.role != 'ground-station' else 'gs'}: {reason}", flush=True)
     return 0
 

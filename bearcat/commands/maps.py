@@ -2,14 +2,13 @@
 
 from __future__ import annotations
 
-import json
-
 from bearcat.maps import Map, list_maps, load_map
+from bearcat.output import Output
 
 
 def register(subparsers) -> None:
     parser = subparsers.add_parser(
-        "maps", help="list and show maps", description="List the built-in maps, or show one as text, JSON or a picture."
+        "maps", description="List the built-in maps, or show one as text, JSON or a picture."
     )
     commands = parser.add_subparsers(dest="maps_command", metavar="SUBCOMMAND", required=True)
 
@@ -19,7 +18,11 @@ def register(subparsers) -> None:
     show = commands.add_parser("show", help="describe a map, print it as JSON or draw it")
     show.add_argument("map", metavar="NAME_OR_PATH", help="a built-in map name or a GeoJSON file")
     show.add_argument("-o", "--output", metavar="PNG", help="draw the map into this PNG file")
-    show.add_argument("--json", action="store_true", help="print the map's summary as JSON")
+    show.add_argument(
+        "--json",
+        action="store_true",
+        help="print the map's summary as JSON and nothing else on stdout (the text goes to stderr)",
+    )
     show.set_defaults(run=run_show)
 
 
@@ -67,25 +70,23 @@ def summary(m: Map) -> dict:
 
 
 def run_show(args) -> int:
+    out = Output(args.json)
     m = load_map(args.map)
     if args.output:
-        _draw(m, args.output)
-    if args.json:
-        print(json.dumps(summary(m), indent=2))
-    elif args.output:
-        print(f"wrote {args.output}")
-    else:
+        out.figure(_draw(m), args.output, dpi=150)
+    elif not args.json:
         lat, lon = m.origin
-        print(f"{m.name}: {m.description}")
-        print(f"  size      {_size(m)}, origin lat {lat:.6f} lon {lon:.6f}")
-        print(f"  obstacles {len(m.obstacles)}, zones {len(m.zones)}, area speed {m.area_speed:g}")
+        out.say(f"{m.name}: {m.description}")
+        out.say(f"  size      {_size(m)}, origin lat {lat:.6f} lon {lon:.6f}")
+        out.say(f"  obstacles {len(m.obstacles)}, zones {len(m.zones)}, area speed {m.area_speed:g}")
         for r in m.regions.values():
             team = f", team {r.team}" if r.team else ""
-            print(f"  region    {r.name} ({r.role}{team}), {r.geometry.area:.1f} m^2")
+            out.say(f"  region    {r.name} ({r.role}{team}), {r.geometry.area:.1f} m^2")
+    out.json(summary(m))
     return 0
 
 
-def _draw(m: Map, output: str) -> None:
+def _draw(m: Map):
     # matplotlib costs a few tenths of a second to import; only drawing pays for it.
     # A bare Figure renders headless without touching pyplot's global backend.
     from matplotlib.figure import Figure
@@ -100,4 +101,4 @@ def _draw(m: Map, output: str) -> None:
     if m.zones or m.area_speed != 1:
         fig.colorbar(scale, ax=ax, label="speed factor", shrink=0.8)
     ax.set_title(f"{m.name}\n{m.description}", fontsize=10)
-    fig.savefig(output, dpi=150)
+    return fig

@@ -8,7 +8,6 @@ numerics live in ``solvers``.
 from __future__ import annotations
 
 import argparse
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +17,7 @@ import numpy as np
 from bearcat import arguments
 from bearcat.commands import ctf as ctf_command
 from bearcat.maps import Map, MapError, Raster, load_map, rasterize
+from bearcat.output import Output, add_json_option
 from bearcat.solvers.openloop import Defender, OpenLoopSolution, solve_openloop
 
 #: Default grid: this many cells along the longer side of the map, so a
@@ -69,7 +69,7 @@ def defender_spec(text: str) -> tuple[float, float, float]:
 
 
 def register(subparsers) -> None:
-    solve = subparsers.add_parser("solve", help="run a solver once on a map")
+    solve = subparsers.add_parser("solve")
     games = solve.add_subparsers(dest="game", metavar="GAME", required=True)
     openloop = games.add_parser(
         "openloop",
@@ -123,7 +123,7 @@ def register(subparsers) -> None:
     )
     openloop.add_argument("--order", type=int, choices=(1, 2), default=1, help="fast-marching order")
     openloop.add_argument("--plot", type=Path, metavar="PNG", help="write a figure of the sets and path")
-    openloop.add_argument("--json", type=Path, metavar="FILE", help="write the result as JSON ('-' for stdout)")
+    add_json_option(openloop, "the result")
     openloop.set_defaults(run=run_openloop)
     ctf_command.register_solve(games)
 
@@ -140,6 +140,7 @@ def stage_speeds(args, stages: int) -> list[float]:
 
 
 def run_openloop(args) -> int:
+    out = Output(args.json)
     game_map = load_map(args.map)
     game_map.check_position(args.attacker, "attacker")
     for k, (x, y, _) in enumerate(args.defender, start=1):
@@ -162,22 +163,15 @@ def run_openloop(args) -> int:
         order=args.order,
     )
     report = openloop_report(args, game_map, spacing, speeds, solution)
-    print(openloop_summary(report))
-    if args.json is not None:
-        text = json.dumps(report, indent=2)
-        if str(args.json) == "-":
-            print(text)
-        else:
-            args.json.write_text(text + "\n")
-            print(f"wrote {args.json}")
+    out.say(openloop_summary(report))
+    out.json(report)
     if args.plot is not None:
         from bearcat.figures import openloop_figure
 
         figure = openloop_figure(
             game_map, raster, solution, targets, args.attacker, [(x, y) for x, y, _ in args.defender], report
         )
-        figure.savefig(args.plot, dpi=110)
-        print(f"wrote {args.plot}")
+        out.figure(figure, args.plot, dpi=110)
     return 0
 
 

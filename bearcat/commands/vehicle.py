@@ -2,13 +2,12 @@
 
 from __future__ import annotations
 
-from bearcat.arguments import UsageError
+from bearcat.arguments import UsageError, seed
 
 
 def register(subparsers) -> None:
     vehicle = subparsers.add_parser(
         "vehicle",
-        help="run a MAVLink vehicle emulator that MAVSDK and ground stations take for a PX4 quadrotor",
         description="Emulate one PX4 quadrotor on MAVLink over UDP: a point mass with acceleration, speed and "
         "climb limits, optional wind and a draining battery. By PX4 SITL's convention vehicle i sends to "
         "127.0.0.1:14540+i with system id i+1; fly it with MAVSDK on udpin://0.0.0.0:14540+i.",
@@ -34,7 +33,7 @@ def register(subparsers) -> None:
     vehicle.add_argument(
         "--endurance", type=float, default=1200.0, metavar="S", help="hover time on a full battery (default 1200 s)"
     )
-    vehicle.add_argument("--seed", type=int, default=0, metavar="S", help="seed of the gusts (default 0)")
+    vehicle.add_argument("--seed", type=seed, default=0, metavar="S", help="seed of the gusts (default 0)")
     vehicle.set_defaults(run=run_vehicle)
 
 
