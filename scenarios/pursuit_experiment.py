@@ -26,11 +26,15 @@ import math
 import zlib
 from dataclasses import asdict, dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from bearcat.maps import load_map, rasterize
 from bearcat.solvers.pursuit_game import pursue
+
+if TYPE_CHECKING:
+    from bearcat.solvers.pursuit_fmm import TravelTimes
 
 THESIS_TABLE = {
     "square-10": (91.6, 98.2, 96.6),
@@ -83,12 +87,12 @@ def run_trial(task: dict) -> dict:
     evader, pursuers = domain.initial_condition(rng, task["pursuers"], setup.separation)
     times = {}
     for name in ("area", "pure"):
-        # One arena per chase, shared by the evader and the pursuers, so the
-        # fronts and the safe set one computes for a state serve the other.
-        arena = domain.arena()
+        # One set of travel times per chase, shared by the evader and the pursuers,
+        # so the fronts and the safe set one computes for a state serve the other.
+        travel_times = domain.travel_times()
         chase = pursue(
-            domain.strategy(name, arena),
-            domain.evader(arena),
+            domain.strategy(name, travel_times),
+            domain.evader(travel_times),
             evader,
             pursuers,
             passable=domain.passable,
@@ -199,7 +203,7 @@ class _Domain:
                 chosen.append(p)
         return evader, np.array(chosen)
 
-    def strategy(self, name: str, arena):
+    def strategy(self, name: str, travel_times):
         if self.kind == "convex":
             from bearcat.solvers.pursuit import ConvexAreaPursuit, StraightPursuit
 
@@ -208,15 +212,15 @@ class _Domain:
 
         if name == "area":
             return FmmAreaPursuit(
-                arena,
+                travel_times,
                 evader_speed=self.speed,
                 pursuer_speeds=self.speed,
                 capture_radius=self.capture_radius,
                 gradient=self.gradient,
             )
-        return GeodesicPursuit(arena)
+        return GeodesicPursuit(travel_times)
 
-    def evader(self, arena):
+    def evader(self, travel_times):
         if self.kind == "convex":
             from bearcat.solvers.pursuit import ConvexFarthestPointEvader
 
@@ -224,11 +228,11 @@ class _Domain:
         from bearcat.solvers.pursuit_fmm import FarthestPointEvader
 
         return FarthestPointEvader(
-            arena, evader_speed=self.speed, pursuer_speeds=self.speed, capture_radius=self.capture_radius
+            travel_times, evader_speed=self.speed, pursuer_speeds=self.speed, capture_radius=self.capture_radius
         )
 
-    def arena(self):
-        """The fast-marching arena of a non-convex domain (None for a convex one, which needs none)."""
+    def travel_times(self) -> TravelTimes | None:
+        """Travel times over a non-convex domain (None for a convex one, whose strategies are analytic)."""
         if self.kind == "convex":
             return None
         from bearcat.solvers.pursuit_fmm import TravelTimes

@@ -36,7 +36,7 @@ import numpy as np
 from numba.core.types.function_type import CompileResultWAP
 
 from bearcat.solvers import hji_kernels as kern
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.errors import InputError, non_negative
 from bearcat.solvers.grid import Grid
 
 __all__ = ["DYNAMICS_SIGNATURE", "Ball", "Box", "ControlAffine", "Player", "SimpleMotion"]
@@ -200,9 +200,8 @@ def _input_set(s, name: str):
         center = np.asarray(s.center, dtype=np.float64).ravel()
         if center.size == 0 or not np.isfinite(center).all():
             raise InputError(f"the {name} ball needs a finite centre, got {s.center}")
-        if not (math.isfinite(s.radius) and s.radius >= 0):
-            raise InputError(f"the {name} ball needs a finite radius >= 0, got {s.radius}")
-        return kern.BALL, center, np.array([float(s.radius)])
+        radius = non_negative(s.radius, f"the {name} ball's radius")
+        return kern.BALL, center, np.array([radius])
     raise InputError(f"the {name} set must be a Box, a Ball or None, got {type(s).__name__}")
 
 

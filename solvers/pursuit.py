@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers.errors import InputError
+from bearcat.solvers.errors import InputError, non_negative
 
 __all__ = [
     "AreaGradient",
@@ -387,10 +387,8 @@ class ConvexFarthestPointEvader:
     Stateful: ``target`` is the current y* (None before the first call)."""
 
     def __init__(self, domain, capture_radius: float) -> None:
-        if not capture_radius >= 0:
-            raise InputError(f"the capture radius must be a non-negative number, got {capture_radius!r}")
         self.domain = _domain(domain)
-        self.capture_radius = float(capture_radius)
+        self.capture_radius = non_negative(capture_radius, "the capture radius")
         self.target: np.ndarray | None = None
         self._merge = _MERGE * _size(self.domain)
 
