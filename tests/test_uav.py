@@ -142,6 +142,63 @@ def test_return_climbs_flies_home_and_lands():
     assert peak >= 11.5 and np.hypot(*f.body.position[:2]) < 1.0 and not f.armed
 
 
+# The emulator's physics rate and the simulation's tick: the flight model must not overshoot at either.
+STEPS = pytest.mark.parametrize("dt", [0.02, 0.1])
+OVERSHOOT = 0.05  # m: 2 % of the lowest take-off altitude, and well inside any GPS's or barometer's noise
+
+
+def _quickest(distance: float, top_speed: float, accel: float) -> float:
+    """The shortest time to cover ``distance`` from rest to rest within a speed and an acceleration limit."""
+    if distance <= top_speed**2 / accel:
+        return 2.0 * math.sqrt(distance / accel)
+    return distance / top_speed + top_speed / accel
+
+
+def _approach(flight: Flight, t: float, seconds: float, dt: float, axis: int, goal: float) -> tuple[float, float]:
+    """Fly for ``seconds``: the highest coordinate on ``axis`` reached, and the time from ``t`` after which the
+    vehicle stayed within 5 cm of ``goal`` for good."""
+    peak, settled = -math.inf, None
+    for k in range(1, round(seconds / dt) + 1):
+        flight.step(t + k * dt, dt)
+        x = float(flight.body.position[axis])
+        peak = max(peak, x)
+        if abs(x - goal) > 0.05:
+            settled = None
+        elif settled is None:
+            settled = k * dt
+    assert settled is not None, f"never settled at {goal}"
+    return peak, settled
+
+
+@STEPS
+@pytest.mark.parametrize("altitude", [2.5, 5.0, 10.0])
+def test_takeoff_stops_at_its_altitude_without_overshoot(altitude, dt):
+    f = _flight()
+    f.arm(0.0)
+    f.takeoff(altitude)
+    peak, settled = _approach(f, 0.0, 20.0, dt, axis=2, goal=altitude)
+    a = f.mass.airframe
+    assert peak <= altitude + OVERSHOOT
+    # No sluggish cure: there within five response times of the quickest climb the limits allow.
+    assert settled <= _quickest(altitude, a.max_climb, a.max_accel) + 5 * a.response
+    assert (f.main, f.sub) == (Main.AUTO, Sub.LOITER)
+
+
+@STEPS
+def test_reposition_stops_at_its_target_without_overshoot(dt):
+    f = _flight()
+    f.arm(0.0)
+    f.takeoff(10.0)
+    t = _run(f, 0.0, 10.0, dt)
+    start = f.body.position.copy()
+    f.reposition(start[0] + 20.0, start[1], 10.0)
+    peak, settled = _approach(f, t, 20.0, dt, axis=0, goal=start[0] + 20.0)
+    a = f.mass.airframe
+    assert peak <= start[0] + 20.0 + OVERSHOOT
+    assert settled <= _quickest(20.0, a.max_speed, a.max_accel) + 5 * a.response
+    assert abs(f.body.position[1] - start[1]) < 0.05 and abs(f.body.position[2] - 10.0) < 0.05
+
+
 # ---------------------------------------------------------------------- over UDP
 
 

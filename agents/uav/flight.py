@@ -206,7 +206,7 @@ class Flight:
         elif self.sub == Sub.RTL:
             self.mass.step(dt, target=self._rtl_leg())
         elif self.target is not None:
-            self.mass.step(dt, target=self.target)
+            self.mass.step(dt, target=self.target, landing=self.sub == Sub.LAND)
         else:
             self.mass.step(dt, velocity=np.zeros(3))
 
