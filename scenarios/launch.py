@@ -31,8 +31,8 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bearcat.agents.ground_station.recorder import EventLog
-from bearcat.agents.ground_station.recording import finish_run
+from bearcat.agents.ground_station.event_log import EventLog
+from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState

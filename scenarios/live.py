@@ -17,7 +17,7 @@ import asyncio
 import logging
 import signal
 
-from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
 from bearcat.bus.codec import Inbox, encode

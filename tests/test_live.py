@@ -16,7 +16,7 @@ from pathlib import Path
 
 import pytest
 
-from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.event_log import read_events
 from bearcat.bus import keys
 from bearcat.bus.zenoh_session import ZenohSession, config
 from tests.support.scenario_files import write_scenario

@@ -22,7 +22,7 @@ from pymavlink import mavutil
 from bearcat.agents.uav.agent import UavAgent
 from bearcat.agents.uav.airframe import Airframe, Body, PointMass
 from bearcat.agents.uav.autopilot import MavsdkAutopilot, SimulatedAutopilot
-from bearcat.agents.uav.flight import DISARM_LANDED, DISARM_PREFLIGHT, Flight, Main, Result, Sub
+from bearcat.agents.uav.flight import DISARM_LANDED, DISARM_PREFLIGHT, CommandResult, Flight, MainMode, SubMode
 from bearcat.bus import keys
 from bearcat.bus.messages import Control, Truth, UavTask
 from bearcat.maps.geodesy import to_geodetic, to_local
@@ -94,12 +94,12 @@ def _run(flight: Flight, t0: float, seconds: float, dt: float = 0.05) -> float:
 
 def test_takeoff_hold_then_land_disarms_after_touchdown():
     f = _flight()
-    assert f.takeoff() == Result.DENIED  # not armed
-    assert f.arm(0.0) == Result.ACCEPTED and f.takeoff(6.0) == Result.ACCEPTED
+    assert f.takeoff() == CommandResult.DENIED  # not armed
+    assert f.arm(0.0) == CommandResult.ACCEPTED and f.takeoff(6.0) == CommandResult.ACCEPTED
     t = _run(f, 0.0, 6.0)
-    assert (f.main, f.sub) == (Main.AUTO, Sub.LOITER) and abs(f.body.position[2] - 6.0) < 0.5
-    assert f.disarm() == Result.DENIED  # in the air
-    assert f.land() == Result.ACCEPTED
+    assert (f.main, f.sub) == (MainMode.AUTO, SubMode.LOITER) and abs(f.body.position[2] - 6.0) < 0.5
+    assert f.disarm() == CommandResult.DENIED  # in the air
+    assert f.land() == CommandResult.ACCEPTED
     t = _run(f, t, 6.0 / 1.5 + 1.0)
     assert not f.in_air and f.armed
     _run(f, t, DISARM_LANDED + 0.2)
@@ -109,20 +109,20 @@ def test_takeoff_hold_then_land_disarms_after_touchdown():
 def test_armed_on_the_ground_disarms_itself_and_offboard_needs_setpoints():
     f = _flight()
     f.arm(0.0)
-    assert f.set_mode(Main.OFFBOARD, 0, 0.5) == Result.DENIED
+    assert f.set_mode(MainMode.OFFBOARD, 0, 0.5) == CommandResult.DENIED
     _run(f, 0.0, DISARM_PREFLIGHT + 0.2)
     assert not f.armed
     f.arm(20.0)
     f.takeoff(5.0)
     t = _run(f, 20.0, 5.0)
     f.offboard(t, "velocity", (2.0, 0.0, 0.0))
-    assert f.set_mode(Main.OFFBOARD, 0, t) == Result.ACCEPTED
+    assert f.set_mode(MainMode.OFFBOARD, 0, t) == CommandResult.ACCEPTED
     for _ in range(40):  # setpoints streamed at 10 Hz for 4 s
         t = _run(f, t, 0.1)
         f.offboard(t, "velocity", (2.0, 0.0, 0.0))
     assert f.body.velocity[0] == pytest.approx(2.0, abs=0.1)
     _run(f, t, 1.5)  # the stream stops: PX4 falls back to hold
-    assert (f.main, f.sub) == (Main.AUTO, Sub.LOITER)
+    assert (f.main, f.sub) == (MainMode.AUTO, SubMode.LOITER)
 
 
 def test_return_climbs_flies_home_and_lands():
@@ -134,7 +134,7 @@ def test_return_climbs_flies_home_and_lands():
     f.reposition(40.0, -30.0, 5.0)
     t = _run(f, t, 15.0)
     assert np.hypot(f.body.position[0] - 40, f.body.position[1] + 30) < 1.0
-    assert f.return_home() == Result.ACCEPTED
+    assert f.return_home() == CommandResult.ACCEPTED
     peak = 0.0
     for _ in range(60):
         t = _run(f, t, 0.5)
@@ -181,7 +181,7 @@ def test_takeoff_stops_at_its_altitude_without_overshoot(altitude, dt):
     assert peak <= altitude + OVERSHOOT
     # No sluggish cure: there within five response times of the quickest climb the limits allow.
     assert settled <= _quickest(altitude, a.max_climb, a.max_accel) + 5 * a.response
-    assert (f.main, f.sub) == (Main.AUTO, Sub.LOITER)
+    assert (f.main, f.sub) == (MainMode.AUTO, SubMode.LOITER)
 
 
 @STEPS
@@ -372,7 +372,7 @@ def test_ground_station_liveliness_loss_triggers_the_failsafe_at_once():
     agent.peer(keys.alive(GAME, "walker", "attacker"), False, 10.0)
     assert agent.failsafe_at is None  # somebody else leaving is not a lost link
     agent.peer(keys.alive(GAME, "ground-station", "gs"), False, 10.0)
-    assert agent.failsafe_at == 10.0 and autopilot.flight.sub == Sub.RTL
+    assert agent.failsafe_at == 10.0 and autopilot.flight.sub == SubMode.RTL
 
 
 def test_two_uavs_fly_at_once():
@@ -452,7 +452,7 @@ def test_a_live_search_game_flies_the_uav_through_mavsdk_and_leaves_no_process(t
     """``bearcat run`` on the search scenario: a vehicle emulator and a UAV peer
     beside the ground station and the walkers, the UAV armed, flown and
     tasked over MAVLink and Zenoh; every process gone at the end."""
-    from bearcat.agents.ground_station.recorder import read_events
+    from bearcat.agents.ground_station.event_log import read_events
     from bearcat.scenarios.schema import load_scenario
 
     # The 35-point game the search-game tests solve too, from the same cache.

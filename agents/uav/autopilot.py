@@ -22,7 +22,7 @@ from typing import Protocol
 import numpy as np
 
 from bearcat.agents.uav.airframe import Airframe
-from bearcat.agents.uav.flight import Flight, Main, Sub
+from bearcat.agents.uav.flight import Flight, MainMode, SubMode
 from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 log = logging.getLogger("bearcat.uav")
@@ -62,12 +62,12 @@ class Autopilot(Protocol):
 
 
 MODE_NAMES = {
-    (Main.AUTO, Sub.READY): "ready",
-    (Main.AUTO, Sub.TAKEOFF): "takeoff",
-    (Main.AUTO, Sub.LOITER): "hold",
-    (Main.AUTO, Sub.MISSION): "mission",
-    (Main.AUTO, Sub.RTL): "return",
-    (Main.AUTO, Sub.LAND): "land",
+    (MainMode.AUTO, SubMode.READY): "ready",
+    (MainMode.AUTO, SubMode.TAKEOFF): "takeoff",
+    (MainMode.AUTO, SubMode.LOITER): "hold",
+    (MainMode.AUTO, SubMode.MISSION): "mission",
+    (MainMode.AUTO, SubMode.RTL): "return",
+    (MainMode.AUTO, SubMode.LAND): "land",
 }
 
 
@@ -91,7 +91,7 @@ class SimulatedAutopilot:
         lat, lon = to_geodetic(b.position[0], b.position[1], self.home)
         speed = float(np.hypot(*b.velocity[:2]))
         heading = bearing(b.velocity[0], b.velocity[1]) if speed > 0.2 else None
-        mode = "offboard" if f.main == Main.OFFBOARD else MODE_NAMES.get((f.main, f.sub), "other")
+        mode = "offboard" if f.main == MainMode.OFFBOARD else MODE_NAMES.get((f.main, f.sub), "other")
         return VehicleState(lat, lon, float(b.position[2]), speed, heading, f.armed, f.in_air, mode, b.battery)
 
     def take_off(self, altitude: float) -> None:
@@ -106,8 +106,8 @@ class SimulatedAutopilot:
     def velocity(self, east: float, north: float, up: float) -> None:
         now = self._now or 0.0
         self.flight.offboard(now, "velocity", (east, north, up))
-        if self.flight.main != Main.OFFBOARD:
-            self._check("offboard", self.flight.set_mode(Main.OFFBOARD, 0, now))
+        if self.flight.main != MainMode.OFFBOARD:
+            self._check("offboard", self.flight.set_mode(MainMode.OFFBOARD, 0, now))
 
     def hold(self) -> None:
         self._check("hold", self.flight.hold())

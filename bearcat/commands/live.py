@@ -126,7 +126,7 @@ def run_live(args) -> int:
 
 
 def run_view(args) -> int:
-    from bearcat.agents.ground_station.recording import write_recording
+    from bearcat.agents.ground_station.rerun_recording import write_recording
     from bearcat.maps import read_geojson
 
     rrd = args.run_dir / "recording.rrd"

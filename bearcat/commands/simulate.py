@@ -16,7 +16,7 @@ from collections import Counter
 from dataclasses import asdict
 from pathlib import Path
 
-from bearcat.agents.ground_station.recording import finish_run
+from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.progress import solve_bars
 from bearcat.scenarios.schema import list_scenarios, load_scenario
 from bearcat.scenarios.simulate import simulate

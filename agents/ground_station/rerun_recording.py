@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.event_log import read_events
 from bearcat.maps import Map
 
 log = logging.getLogger(__name__)
