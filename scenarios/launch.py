@@ -217,7 +217,7 @@ def launch(
         record.close()
         session.close()
         (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
-        finish_run(out, scenario.map, game)
+        finish_run(out, scenario)
     return outcome
 
 

@@ -12,6 +12,12 @@ saw and what each phone showed, on one time line.
 - ``game``: the referee's states as a text log, and the solver's value
   shown to each phone as a plot.
 
+Every map is drawn north up and east right, the agents as the thesis draws
+them (the attacker, or evader, a blue circle; the defender, or pursuer, a red
+triangle; a UAV a square in its team's colour), and the recording carries a
+layout: the ground station's picture on the left, each phone's screen on the
+right above the referee's log and the solver's value.
+
 Built after the run from ``events.jsonl``, so the recording never slows a
 game down, and any event log (simulated or live) can be turned into one.
 """
@@ -20,6 +26,7 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
@@ -29,65 +36,93 @@ from bearcat.maps import Map
 
 log = logging.getLogger(__name__)
 
-COLOURS = [(31, 119, 180), (214, 39, 40), (44, 160, 44), (255, 127, 14), (148, 103, 189), (140, 86, 75)]
+BLUE = (40, 100, 255)
+RED = (230, 30, 30)
+# The thesis's figures: the attacker (or evader) a blue circle, the defender (or pursuer) a red triangle.
+TEAM_MARKERS = {
+    "attacker": ("circle", BLUE),
+    "evader": ("circle", BLUE),
+    "defender": ("triangle", RED),
+    "pursuer": ("triangle", RED),
+}
+# Members of no known team, in order of appearance.
+OTHER_COLOURS = [(44, 160, 44), (255, 127, 14), (148, 103, 189), (140, 86, 75), (23, 190, 207)]
+AREA = (128, 128, 128)
+BUILDINGS = (70, 70, 70)
+REGIONS = (0, 170, 0)
+# The entity trees drawn on the map; each is mirrored north-south (see _north_up).
+FIELD_ROOTS = ("map", "ground", "phone")
 
 
-def finish_run(directory: str | Path, game_map: Map, name: str) -> Path | None:
+def finish_run(directory: str | Path, scenario) -> Path | None:
     """Write a run directory's ``map.geojson`` and, from its ``events.jsonl``,
-    its ``recording.rrd``; the recording's path (None without rerun-sdk)."""
+    its ``recording.rrd``, with each agent and UAV of ``scenario`` drawn as
+    its team; the recording's path (None without rerun-sdk)."""
     from bearcat.maps import write_geojson
 
     directory = Path(directory)
-    write_geojson(game_map, directory / "map.geojson", units="metres")
+    write_geojson(scenario.map, directory / "map.geojson", units="metres")
     if importlib.util.find_spec("rerun") is None:
         log.warning("rerun-sdk is not installed: %s has an event log but no recording", directory)
         return None
-    return write_recording(directory / "events.jsonl", game_map, directory / "recording.rrd", name=name)
+    teams = {member.id: member.team for member in (*scenario.agents, *scenario.uavs)}
+    return write_recording(
+        directory / "events.jsonl", scenario.map, directory / "recording.rrd", name=scenario.name, teams=teams
+    )
 
 
-def write_recording(events_path: str | Path, game_map: Map, rrd_path: str | Path, *, name: str = "bearcat") -> Path:
+def write_recording(
+    events_path: str | Path,
+    game_map: Map,
+    rrd_path: str | Path,
+    *,
+    name: str = "bearcat",
+    teams: Mapping[str, str] | None = None,
+) -> Path:
+    """Turn an event log into a Rerun recording; ``teams`` (agent or UAV id ->
+    team) picks each one's marker, and without it every agent is a circle of
+    its own colour."""
     import rerun as rr
+    import rerun.blueprint as rrb
 
     events = read_events(events_path)
     rec = rr.RecordingStream(f"bearcat-{name}", recording_id=str(Path(events_path).resolve()))
     start = min((e["t"] for e in events if "t" in e), default=0.0)
     to_local = _converter(game_map)
-    colour: dict[str, tuple] = {}
-
-    def colour_of(agent: str):
-        return colour.setdefault(agent, COLOURS[len(colour) % len(COLOURS)])
-
-    _log_map(rec, rr, game_map)
     sent = {}
     for e in events:
         if e["event"] == "sent":
             m = e["message"]
             sent[(e["key"], m.get("seq"))] = m
+    # Only UAVs report an altitude.
+    flying = {m["agent"] for m in sent.values() if m["type"] in ("truth", "fix") and m.get("alt") is not None}
+    markers = _Markers(rr, game_map, teams or {}, flying)
+    phones: list[str] = []
+
+    for root in FIELD_ROOTS:
+        rec.log(root, _north_up(rr), static=True)
+    _log_map(rec, rr, game_map)
     for e in events:
         rec.set_time("game_time", duration=max(e["t"] - start, 0.0))
         kind = e["event"]
         if kind == "sent":
             m = e["message"]
             if m["type"] == "truth":
-                rec.log(
-                    f"ground/truth/{m['agent']}",
-                    rr.Points2D(
-                        [to_local(m["lat"], m["lon"])], radii=0.6, colors=[colour_of(m["agent"])], labels=[m["agent"]]
-                    ),
-                )
+                drawn = markers.draw([(m["agent"], to_local(m["lat"], m["lon"]))])
+                rec.log(f"ground/truth/{m['agent']}", drawn[markers.shape(m["agent"])])
             elif m["type"] == "state":
                 rec.log(
                     "game/state", rr.TextLog(f"{m['phase']}: {m.get('winner') or ''} {m.get('reason', '')}".strip())
                 )
             elif m["type"] == "fix" and e["sender"] != "launcher":
-                _log_fix(rec, rr, m, to_local, colour_of)
+                _log_fix(rec, rr, m, to_local, markers)
             elif m["type"] == "uav-task":
                 rec.log(
                     f"ground/uav/{m['uav']}/target",
                     rr.Points2D(
                         [to_local(m["lat"], m["lon"])],
                         radii=1.5,
-                        colors=[colour_of(m["uav"])],
+                        colors=[markers.colour(m["uav"])],
                         labels=[f"{m['uav']} {m['kind']}"],
                     ),
                 )
@@ -106,11 +141,13 @@ def write_recording(events_path: str | Path, game_map: Map, rrd_path: str | Path
             if m is None:
                 continue
             if m["type"] == "guidance":
-                _log_screen(rec, rr, m, to_local, colour_of)
+                if m["agent"] not in phones:
+                    phones.append(m["agent"])
+                _log_screen(rec, rr, m, to_local, markers)
             elif m["type"] == "fix" and e["receiver"] == "gs":
-                _log_fix(rec, rr, m, to_local, colour_of)
+                _log_fix(rec, rr, m, to_local, markers)
     rrd_path = Path(rrd_path)
-    rec.save(rrd_path)
+    rec.save(rrd_path, default_blueprint=_layout(rrb, game_map, phones))
     return rrd_path
 
 
@@ -122,27 +159,113 @@ def _converter(game_map: Map):
     return to_local
 
 
-def _log_map(rec, rr, game_map: Map) -> None:
-    rec.log(
-        "map/area", rr.LineStrips2D([np.asarray(game_map.area.exterior.coords)], colors=[(90, 90, 90)]), static=True
+def _north_up(rr):
+    """Rerun draws 2-D views with y down, as for images; mirroring y puts north (+y) at the top."""
+    return rr.Transform3D(scale=[1.0, -1.0, 1.0])
+
+
+def _layout(rrb, game_map: Map, phones: list[str]):
+    """The ground station's picture on the left; on the right each phone's
+    screen above the referee's states with the alerts, and the solver's
+    value; every map filling its view."""
+    west, south, east, north = game_map.bounds
+    margin = 0.03 * max(east - west, north - south)
+    # y is mirrored (_north_up): the view runs from -north to -south.
+    bounds = rrb.VisualBounds2D(x_range=[west - margin, east + margin], y_range=[-north - margin, -south + margin])
+
+    def field(name: str, drawn: str):
+        return rrb.Spatial2DView(name=name, origin="/", contents=["/map/**", drawn], visual_bounds=bounds)
+
+    texts = rrb.TextLogView(
+        name="referee and alerts",
+        origin="/",
+        columns=rrb.TextLogColumns(
+            timeline_columns=[rrb.encodings.TimelineColumn("game_time")],
+            text_log_columns=[
+                rrb.encodings.TextLogColumn("body"),
+                rrb.encodings.TextLogColumn("entitypath", visible=False),
+                rrb.encodings.TextLogColumn("loglevel", visible=False),
+            ],
+        ),
     )
+    logs = rrb.Horizontal(texts, rrb.TimeSeriesView(name="value", origin="/game/value"))
+    screens = [field(f"{agent}'s phone", f"/phone/{agent}/**") for agent in phones]
+    right = rrb.Vertical(rrb.Grid(*screens), logs, row_shares=[2, 1]) if screens else logs
+    return rrb.Blueprint(
+        rrb.Horizontal(field("ground station", "/ground/**"), right),
+        rrb.TimePanel(timeline="game_time"),
+    )
+
+
+class _Markers:
+    """How each agent is drawn: its team's shape and colour (a UAV a square),
+    at a size that reads on this map."""
+
+    def __init__(self, rr, game_map: Map, teams: Mapping[str, str], flying: set[str]) -> None:
+        self.rr = rr
+        self.teams = teams
+        self.flying = flying
+        west, south, east, north = game_map.bounds
+        self.size = max(1.0, 0.015 * max(east - west, north - south))  # m, a circle's radius
+        self._others: dict[str, tuple] = {}
+
+    def colour(self, agent: str) -> tuple:
+        return self._style(agent)[1]
+
+    def shape(self, agent: str) -> str:
+        return "square" if agent in self.flying else self._style(agent)[0]
+
+    def draw(self, placed: list[tuple[str, tuple[float, float]]]) -> dict:
+        """The archetypes that draw ``placed`` (agent, (x, y)) pairs, by
+        shape: circle, triangle and square, each a batch (empty ones clear)."""
+        rr, size = self.rr, self.size
+        by_shape: dict[str, list] = {"circle": [], "triangle": [], "square": []}
+        for agent, point in placed:
+            by_shape[self.shape(agent)].append((agent, point, self.colour(agent)))
+
+        def fields(shape: str):
+            chosen = by_shape[shape]
+            return [p for _, p, _ in chosen], [c for _, _, c in chosen], [a for a, _, _ in chosen]
+
+        points, colours, labels = fields("circle")
+        circles = rr.Points2D(points, radii=size, colors=colours, labels=labels)
+        points, colours, labels = fields("triangle")
+        # A triangle pointing north, its stroke as wide as its inner radius, so it reads as filled.
+        corners = [(np.sin(a), np.cos(a)) for a in np.radians([0.0, 120.0, 240.0, 0.0])]
+        outlines = [[(x + 0.7 * size * dx, y + 0.7 * size * dy) for dx, dy in corners] for x, y in points]
+        triangles = rr.LineStrips2D(outlines, radii=0.35 * size, colors=colours, labels=labels)
+        points, colours, labels = fields("square")
+        squares = rr.Boxes2D(centers=points, half_sizes=[(size, size)] * len(points), colors=colours, labels=labels)
+        return {"circle": circles, "triangle": triangles, "square": squares}
+
+    def _style(self, agent: str) -> tuple[str, tuple]:
+        marker = TEAM_MARKERS.get(self.teams.get(agent, ""))
+        if marker is not None:
+            return marker
+        return "circle", self._others.setdefault(agent, OTHER_COLOURS[len(self._others) % len(OTHER_COLOURS)])
+
+
+def _log_map(rec, rr, game_map: Map) -> None:
+    rec.log("map/area", rr.LineStrips2D([np.asarray(game_map.area.exterior.coords)], colors=[AREA]), static=True)
     if game_map.obstacles:
         rings = [np.asarray(o.exterior.coords) for o in game_map.obstacles]
-        rec.log("map/buildings", rr.LineStrips2D(rings, colors=[(60, 60, 60)], radii=0.3), static=True)
+        rec.log("map/buildings", rr.LineStrips2D(rings, colors=[BUILDINGS], radii=0.3), static=True)
     for name, region in game_map.regions.items():
         parts = getattr(region.geometry, "geoms", [region.geometry])
         rings = [np.asarray(p.exterior.coords) for p in parts]
-        rec.log(f"map/regions/{name}", rr.LineStrips2D(rings, colors=[(0, 150, 0)], labels=[name]), static=True)
+        rec.log(f"map/regions/{name}", rr.LineStrips2D(rings, colors=[REGIONS], labels=[name]), static=True)
 
 
-def _log_fix(rec, rr, m, to_local, colour_of) -> None:
+def _log_fix(rec, rr, m, to_local, markers: _Markers) -> None:
+    """A fix as a small dot in a paler shade of its agent's colour, beside the truth's marker."""
+    paler = tuple(int(c + (255 - c) * 0.5) for c in markers.colour(m["agent"]))
     rec.log(
         f"ground/fix/{m['agent']}",
-        rr.Points2D([to_local(m["lat"], m["lon"])], radii=0.4, colors=[colour_of(m["agent"])]),
+        rr.Points2D([to_local(m["lat"], m["lon"])], radii=0.35 * markers.size, colors=[paler]),
     )
 
 
-def _log_screen(rec, rr, m, to_local, colour_of) -> None:
+def _log_screen(rec, rr, m, to_local, markers: _Markers) -> None:
     agent = m["agent"]
     base = f"phone/{agent}"
     rings = [np.array([to_local(lat, lon) for lat, lon in ring]) for ring in m.get("region", []) if ring]
@@ -158,18 +281,13 @@ def _log_screen(rec, rr, m, to_local, colour_of) -> None:
     reports = m.get("reports", [])
     if reports:
         points = [to_local(r["lat"], r["lon"]) for r in reports]
-        rec.log(
-            f"{base}/agents",
-            rr.Points2D(
-                points, radii=0.5, labels=[r["agent"] for r in reports], colors=[colour_of(r["agent"]) for r in reports]
-            ),
-        )
+        drawn = markers.draw([(r["agent"], p) for r, p in zip(reports, points)])
+        for shape, archetype in drawn.items():
+            rec.log(f"{base}/agents/{shape}s", archetype)
         me = next((p for p, r in zip(points, reports) if r["agent"] == agent), None)
         if me is not None and m.get("heading") is not None:
             b = np.radians(m["heading"])
-            rec.log(
-                f"{base}/heading",
-                rr.Arrows2D(origins=[me], vectors=[(4 * np.sin(b), 4 * np.cos(b))], colors=[colour_of(agent)]),
-            )
+            arrow = 4 * markers.size * np.array([np.sin(b), np.cos(b)])
+            rec.log(f"{base}/heading", rr.Arrows2D(origins=[me], vectors=[arrow], colors=[markers.colour(agent)]))
     if m.get("value") is not None:
         rec.log(f"game/value/{agent}", rr.Scalars(m["value"]))

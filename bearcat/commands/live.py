@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bearcat.arguments import UsageError, non_negative
 from bearcat.progress import solve_bars
 from bearcat.scenarios.schema import load_scenario
 
@@ -26,7 +27,8 @@ def register(subparsers) -> None:
     view = subparsers.add_parser(
         "view",
         help="replay a run's Rerun recording",
-        description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing).",
+        description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing), "
+        "or save a picture of it at a game time.",
     )
     view.add_argument(
         "run_dir", metavar="RUN", type=Path, help="a run directory (bearcat run --out, bearcat simulate --out)"
@@ -36,6 +38,12 @@ def register(subparsers) -> None:
         type=Path,
         metavar="PNG",
         help="render headless to this PNG instead of opening a window (needs a Vulkan driver such as mesa's)",
+    )
+    view.add_argument(
+        "--at",
+        type=non_negative,
+        metavar="SECONDS",
+        help="with --screenshot: the game time to show, in seconds from the start (default: the end)",
     )
     view.set_defaults(run=run_view)
 
@@ -138,7 +146,13 @@ def run_view(args) -> int:
             )
         write_recording(events, read_geojson(map_file), rrd, name=args.run_dir.name)
     if args.screenshot is not None:
-        return _open_viewer(rrd, "--headless", "--screenshot-to", str(args.screenshot), "--window-size", "1280x720")
+        from bearcat.screenshot import screenshot
+
+        shown = screenshot(rrd, args.screenshot, at=args.at)
+        print(f"{args.screenshot}: {args.run_dir} at {shown:.1f} s of game time")
+        return 0
+    if args.at is not None:
+        raise UsageError("--at needs --screenshot: the viewer's time line sets the time of an open window")
     return _open_viewer(rrd)
 
 

@@ -54,7 +54,7 @@ def run(args) -> int:
         record = asdict(outcome)
         if events is not None:
             (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")
-            finish_run(events.parent, scenario.map, scenario.name)
+            finish_run(events.parent, scenario)
         tally[outcome.winner or "none"] += 1
         if args.json:
             print(json.dumps(record), flush=True)
