@@ -26,6 +26,7 @@ from bearcat.agents.uav.flight import Flight, MainMode, SubMode
 from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 log = logging.getLogger("bearcat.uav")
+TAKE_OFF_WAIT = 10.0  # s a reposition waits for a vehicle that was told to take off to leave the ground
 
 
 @dataclass(frozen=True)
@@ -211,7 +212,7 @@ class MavsdkAutopilot:
         home = self._state.get("position")
         base = 0.0 if home is None else home.absolute_altitude_m - home.relative_altitude_m
         self._leave_offboard()
-        self._do("go to", self.action.goto_location, lat, lon, base + altitude, float("nan"))
+        self._do("go to", self._goto_when_flying, lat, lon, base + altitude)
 
     def velocity(self, east: float, north: float, up: float) -> None:
         """An offboard velocity setpoint; MAVSDK repeats the latest at 20 Hz,
@@ -246,6 +247,15 @@ class MavsdkAutopilot:
     def _do(self, what: str, call, *args) -> None:
         if self._queue is not None:
             self._queue.put_nowait((what, call, args))
+
+    async def _goto_when_flying(self, lat: float, lon: float, amsl: float) -> None:
+        """PX4 takes a reposition only in the air, so one sent straight after
+        the take-off waits (a while at most) until the vehicle says it is up."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + TAKE_OFF_WAIT
+        while not self._state.get("in_air") and loop.time() < deadline:
+            await asyncio.sleep(0.05)
+        await self.action.goto_location(lat, lon, amsl, float("nan"))
 
     async def _work(self) -> None:
         while True:
