@@ -24,6 +24,7 @@ from bearcat.arguments import UsageError
 
 TIMELINE = "game_time"
 PANELS = ("/top_panel", "/blueprint_panel", "/selection_panel")
+SETTLE_FRAMES = 20  # pictures at most until two agree
 STARTUP = 60.0  # s for the viewer to start and load the recording (a software rasteriser on a loaded host is slow)
 
 
@@ -52,7 +53,7 @@ def screenshot(rrd: Path, png: Path, *, at: float | None = None, size: tuple[int
             blueprint.setdefault("/time_panel", {}).setdefault("TimePanelBlueprint", {})["state"] = "Hidden"
             client.set_blueprint(blueprint, of="recording")
             client.set_time(TIMELINE, duration=shown, play_state="paused")
-            png.write_bytes(client.take_screenshot())
+            png.write_bytes(_settled_picture(client))
             return shown
         finally:
             _stop(process)
@@ -85,6 +86,19 @@ def _wait_for_recording(port: int, process: subprocess.Popen, errors, rrd: Path)
             return client, (timeline.end or 0) / 1e9
         time.sleep(0.1)
     raise TimeoutError(f"the Rerun viewer did not show {rrd} within {STARTUP:g} s")
+
+
+def _settled_picture(client) -> bytes:
+    """The picture once two in a row agree: the viewer fetches a recording's
+    chunks as its views first ask for them, so the first frames at a new
+    time may lack some of what was there."""
+    previous = None
+    for _ in range(SETTLE_FRAMES):
+        picture = client.take_screenshot()
+        if picture == previous:
+            break
+        previous = picture
+    return picture
 
 
 def _stop(process: subprocess.Popen) -> None:

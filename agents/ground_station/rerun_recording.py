@@ -227,15 +227,20 @@ class _Markers:
             chosen = by_shape[shape]
             return [p for _, p, _ in chosen], [c for _, _, c in chosen], [a for a, _, _ in chosen]
 
+        def outlines(shape: str, corners_at: list[float], reach: float, stroke: float):
+            """Closed outlines around each point, corners at these bearings (degrees) ``reach`` out; line
+            strips, since Rerun places a box's label as if north were down."""
+            points, colours, labels = fields(shape)
+            corners = [(np.sin(a), np.cos(a)) for a in np.radians([*corners_at, corners_at[0]])]
+            rings = [[(x + reach * dx, y + reach * dy) for dx, dy in corners] for x, y in points]
+            return rr.LineStrips2D(rings, radii=stroke, colors=colours, labels=labels)
+
         points, colours, labels = fields("circle")
         circles = rr.Points2D(points, radii=size, colors=colours, labels=labels)
-        points, colours, labels = fields("triangle")
         # A triangle pointing north, its stroke as wide as its inner radius, so it reads as filled.
-        corners = [(np.sin(a), np.cos(a)) for a in np.radians([0.0, 120.0, 240.0, 0.0])]
-        outlines = [[(x + 0.7 * size * dx, y + 0.7 * size * dy) for dx, dy in corners] for x, y in points]
-        triangles = rr.LineStrips2D(outlines, radii=0.35 * size, colors=colours, labels=labels)
-        points, colours, labels = fields("square")
-        squares = rr.Boxes2D(centers=points, half_sizes=[(size, size)] * len(points), colors=colours, labels=labels)
+        triangles = outlines("triangle", [0.0, 120.0, 240.0], 0.7 * size, 0.35 * size)
+        # A UAV, seen from above: a square frame.
+        squares = outlines("square", [45.0, 135.0, 225.0, 315.0], np.sqrt(2.0) * size, 0.15 * size)
         return {"circle": circles, "triangle": triangles, "square": squares}
 
     def _style(self, agent: str) -> tuple[str, tuple]:
