@@ -51,17 +51,20 @@ def picture(run, at: float, png) -> np.ndarray:
     return np.round(imread(png)[..., :3] * 255).astype(int)
 
 
-def truth(run, agent: str, at: float) -> np.ndarray:
-    """Where ``agent`` really was at game time ``at`` (local metres), from the event log."""
-    to_local = FIELD.to_local
-    last = None
+def tracks(run) -> dict[str, list[tuple[float, np.ndarray]]]:
+    """Where each agent really was (game time, local metres), from the event log."""
+    out: dict[str, list] = {}
     for line in (run / "events.jsonl").read_text().splitlines():
         e = json.loads(line)
-        if e["event"] == "sent" and e["message"]["type"] == "truth" and e["message"]["agent"] == agent:
-            if e["t"] > at:
-                break
-            last = np.array(to_local(e["message"]["lat"], e["message"]["lon"]), float)
-    return last
+        if e["event"] == "sent" and e["message"]["type"] == "truth":
+            m = e["message"]
+            out.setdefault(m["agent"], []).append((e["t"], np.array(FIELD.to_local(m["lat"], m["lon"]), float)))
+    return out
+
+
+def where(track, at: float) -> np.ndarray:
+    """The last position of ``track`` at or before ``at``."""
+    return [p for t, p in track if t <= at][-1]
 
 
 class GroundView:
@@ -118,47 +121,37 @@ def _hue(image: np.ndarray, colour) -> np.ndarray:
     return (np.abs(ratio - target) <= 0.12).all(axis=2) & (strongest[..., 0] > 100)
 
 
+def _count_near(mask: np.ndarray, point, radius: float) -> int:
+    column, row = np.round(point).astype(int)
+    d = int(radius)
+    return int(mask[row - d : row + d + 1, column - d : column + d + 1].sum())
+
+
 def test_pictures_at_two_times_show_north_up_and_each_agent_where_it_was(run, tmp_path):
-    events = [json.loads(line) for line in (run / "events.jsonl").read_text().splitlines()]
-    end = max(e["t"] for e in events)
+    track = tracks(run)
+    attacker_track = track["attacker"]
+    end = attacker_track[-1][0]
     early = 1.0
-    start = truth(run, "attacker", early)
     # A later time when the attacker had moved well away.
-    later = next(
-        e["t"]
-        for e in events
-        if e["event"] == "sent"
-        and e["message"]["type"] == "truth"
-        and e["message"]["agent"] == "attacker"
-        and e["t"] < end - 0.5
-        and np.linalg.norm(truth(run, "attacker", e["t"]) - start) > 6.0
-    )
+    later = next(t for t, p in attacker_track if t < end - 0.5 and np.linalg.norm(p - where(attacker_track, early)) > 6)
     seen = {}
     for at in (early, later):
         image = picture(run, at, tmp_path / f"at-{at:g}.png")
         view = GroundView(image)
         # North up: the long green edge of the return strip (y = 45 m) is near the top of the map, none near
         # the bottom where it would be drawn with north down; the flag's ring (25, 15) sits low.
-        green = view.inside(_hue(image[:, : image.shape[1] // 2], REGIONS))
+        green = view.inside(_hue(view.image, REGIONS))
         long_rows = np.nonzero(green.sum(axis=1) > 0.5 * (view.right - view.left))[0]
-        strip_edge = view.pixel(25.0, 45.0)[1]
-        mirrored_edge = view.pixel(25.0, 5.0)[1]
-        assert len(long_rows) and np.abs(long_rows - strip_edge).min() <= 4
-        assert np.abs(long_rows - mirrored_edge).min() > 20
-        flag, mirrored_flag = view.pixel(25.0, 15.0), view.pixel(25.0, 35.0)
-        ring = 3.0 / (FIELD.bounds[2] - FIELD.bounds[0]) * (view.right - view.left)  # px, a bit over 2.5 m
-
-        def green_near(point):
-            c, r = np.round(point).astype(int)
-            d = int(ring)
-            return int(green[r - d : r + d + 1, c - d : c + d + 1].sum())
-
-        assert green_near(flag) > 20 and green_near(mirrored_flag) == 0
+        assert len(long_rows) and np.abs(long_rows - view.pixel(25.0, 45.0)[1]).min() <= 4
+        assert np.abs(long_rows - view.pixel(25.0, 5.0)[1]).min() > 20
+        ring = 3.0 / (view.east - view.west) * (view.right - view.left)  # px, a bit over the flag's 2.5 m
+        assert _count_near(green, view.pixel(25.0, 15.0), ring) > 20
+        assert _count_near(green, view.pixel(25.0, 35.0), ring) == 0
         # The attacker a blue circle, the defender a red triangle, each where it really was.
         attacker = view.marker(_hue(view.image, BLUE))
         defender = view.marker(_hue(view.image, RED))
-        assert np.linalg.norm(attacker - truth(run, "attacker", at)) < TOLERANCE
-        assert np.linalg.norm(defender - truth(run, "defender", at)) < TOLERANCE
+        assert np.linalg.norm(attacker - where(attacker_track, at)) < TOLERANCE
+        assert np.linalg.norm(defender - where(track["defender"], at)) < TOLERANCE
         seen[at] = attacker
         # Nothing of the viewer's own over the views: no top bar (where its "Software rasterizer" badge sits),
         # no warning icon's orange, no notice's box.
