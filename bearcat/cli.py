@@ -45,8 +45,9 @@ def user_errors() -> tuple[type[BaseException], ...]:
     """The errors a user can cause. ``main`` looks them up only once an
     exception reaches it: the classes live beside the code that raises them,
     whose imports ``bearcat --help`` should not pay for. Of the OS's errors
-    only those that can only mean a path the user gave are here; a run or
-    cache directory that refuses a write arrives as ``WriteError``."""
+    only those that can only mean a path the user gave, or a helper program
+    (the Rerun viewer) that cannot run here, are; a run or cache directory
+    that refuses a write arrives as ``WriteError``."""
     from bearcat.bus.errors import BusError
     from bearcat.maps.errors import MapError
     from bearcat.netem.profiles import ProfileError
@@ -65,6 +66,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
         IsADirectoryError,
         PermissionError,
         TimeoutError,
+        ChildProcessError,
     )
 
 

@@ -35,8 +35,8 @@ from contextlib import closing
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from bearcat.agents.ground_station.recorder import EventLog, read_events
-from bearcat.agents.ground_station.recording import finish_run
+from bearcat.agents.ground_station.event_log import EventLog, read_events
+from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
@@ -224,7 +224,7 @@ def launch(
             )
             record.note(time.time(), "outcome", **vars(outcome))
             (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
-    finish_run(out, scenario.map, game)
+    finish_run(out, scenario)
     return outcome
 
 

@@ -18,7 +18,7 @@ import logging
 import signal
 from contextlib import closing
 
-from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
 from bearcat.bus.codec import Inbox

@@ -20,7 +20,7 @@ from pathlib import Path
 import shapely
 import simpy
 
-from bearcat.agents.ground_station.recorder import EventLog
+from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.inprocess import InProcessBus

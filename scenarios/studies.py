@@ -75,7 +75,7 @@ def play_task(task: dict) -> dict:
 
 def _true_value(scenario, events: str, t: float) -> float | None:
     """The capture-the-flag value at the players' true positions at time ``t``."""
-    from bearcat.agents.ground_station.recorder import read_events
+    from bearcat.agents.ground_station.event_log import read_events
     from bearcat.scenarios.cast import _CtfGame
 
     if scenario.game != "ctf":

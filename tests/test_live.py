@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from bearcat.agents.ground_station.recorder import EventLog, read_events
+from bearcat.agents.ground_station.event_log import EventLog, read_events
 from bearcat.bus import keys
 from bearcat.bus.codec import decode, encode
 from bearcat.bus.messages import Fix, GameState

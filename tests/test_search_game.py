@@ -12,7 +12,7 @@ import msgspec
 import numpy as np
 import pytest
 
-from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.event_log import read_events
 from bearcat.agents.ground_station.uav_tasking import TRACK_FOR
 from bearcat.scenarios.schema import ScenarioError, load_scenario, parse_scenario
 from bearcat.scenarios.simulate import simulate

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import shapely
 
-from bearcat.agents.ground_station.recorder import read_events
+from bearcat.agents.ground_station.event_log import read_events
 from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.bus import keys
 from bearcat.bus.messages import Control, Truth

@@ -22,7 +22,7 @@ from pymavlink import mavutil
 from bearcat.agents.uav.agent import UavAgent
 from bearcat.agents.uav.airframe import Airframe, Body, PointMass
 from bearcat.agents.uav.autopilot import MavsdkAutopilot, SimulatedAutopilot
-from bearcat.agents.uav.flight import DISARM_LANDED, DISARM_PREFLIGHT, Flight, Main, Result, Sub
+from bearcat.agents.uav.flight import DISARM_LANDED, DISARM_PREFLIGHT, CommandResult, Flight, MainMode, SubMode
 from bearcat.bus import keys
 from bearcat.bus.messages import Control, Truth, UavTask
 from bearcat.maps.geodesy import to_geodetic, to_local
@@ -94,12 +94,12 @@ def _run(flight: Flight, t0: float, seconds: float, dt: float = 0.05) -> float:
 
 def test_takeoff_hold_then_land_disarms_after_touchdown():
     f = _flight()
-    assert f.takeoff() == Result.DENIED  # not armed
-    assert f.arm(0.0) == Result.ACCEPTED and f.takeoff(6.0) == Result.ACCEPTED
+    assert f.takeoff() == CommandResult.DENIED  # not armed
+    assert f.arm(0.0) == CommandResult.ACCEPTED and f.takeoff(6.0) == CommandResult.ACCEPTED
     t = _run(f, 0.0, 6.0)
-    assert (f.main, f.sub) == (Main.AUTO, Sub.LOITER) and abs(f.body.position[2] - 6.0) < 0.5
-    assert f.disarm() == Result.DENIED  # in the air
-    assert f.land() == Result.ACCEPTED
+    assert (f.main, f.sub) == (MainMode.AUTO, SubMode.LOITER) and abs(f.body.position[2] - 6.0) < 0.5
+    assert f.disarm() == CommandResult.DENIED  # in the air
+    assert f.land() == CommandResult.ACCEPTED
     t = _run(f, t, 6.0 / 1.5 + 1.0)
     assert not f.in_air and f.armed
     _run(f, t, DISARM_LANDED + 0.2)
@@ -109,20 +109,20 @@ def test_takeoff_hold_then_land_disarms_after_touchdown():
 def test_armed_on_the_ground_disarms_itself_and_offboard_needs_setpoints():
     f = _flight()
     f.arm(0.0)
-    assert f.set_mode(Main.OFFBOARD, 0, 0.5) == Result.DENIED
+    assert f.set_mode(MainMode.OFFBOARD, 0, 0.5) == CommandResult.DENIED
     _run(f, 0.0, DISARM_PREFLIGHT + 0.2)
     assert not f.armed
     f.arm(20.0)
     f.takeoff(5.0)
     t = _run(f, 20.0, 5.0)
     f.offboard(t, "velocity", (2.0, 0.0, 0.0))
-    assert f.set_mode(Main.OFFBOARD, 0, t) == Result.ACCEPTED
+    assert f.set_mode(MainMode.OFFBOARD, 0, t) == CommandResult.ACCEPTED
     for _ in range(40):  # setpoints streamed at 10 Hz for 4 s
         t = _run(f, t, 0.1)
         f.offboard(t, "velocity", (2.0, 0.0, 0.0))
     assert f.body.velocity[0] == pytest.approx(2.0, abs=0.1)
     _run(f, t, 1.5)  # the stream stops: PX4 falls back to hold
-    assert (f.main, f.sub) == (Main.AUTO, Sub.LOITER)
+    assert (f.main, f.sub) == (MainMode.AUTO, SubMode.LOITER)
 
 
 def test_return_climbs_flies_home_and_lands():
@@ -134,12 +134,69 @@ def test_return_climbs_flies_home_and_lands():
     f.reposition(40.0, -30.0, 5.0)
     t = _run(f, t, 15.0)
     assert np.hypot(f.body.position[0] - 40, f.body.position[1] + 30) < 1.0
-    assert f.return_home() == Result.ACCEPTED
+    assert f.return_home() == CommandResult.ACCEPTED
     peak = 0.0
     for _ in range(60):
         t = _run(f, t, 0.5)
         peak = max(peak, f.body.position[2])
     assert peak >= 11.5 and np.hypot(*f.body.position[:2]) < 1.0 and not f.armed
+
+
+# The emulator's physics rate and the simulation's tick: the flight model must not overshoot at either.
+STEPS = pytest.mark.parametrize("dt", [0.02, 0.1])
+OVERSHOOT = 0.05  # m: 2 % of the lowest take-off altitude, and well inside any GPS's or barometer's noise
+
+
+def _quickest(distance: float, top_speed: float, accel: float) -> float:
+    """The shortest time to cover ``distance`` from rest to rest within a speed and an acceleration limit."""
+    if distance <= top_speed**2 / accel:
+        return 2.0 * math.sqrt(distance / accel)
+    return distance / top_speed + top_speed / accel
+
+
+def _approach(flight: Flight, t: float, seconds: float, dt: float, axis: int, goal: float) -> tuple[float, float]:
+    """Fly for ``seconds``: the highest coordinate on ``axis`` reached, and the time from ``t`` after which the
+    vehicle stayed within 5 cm of ``goal`` for good."""
+    peak, settled = -math.inf, None
+    for k in range(1, round(seconds / dt) + 1):
+        flight.step(t + k * dt, dt)
+        x = float(flight.body.position[axis])
+        peak = max(peak, x)
+        if abs(x - goal) > 0.05:
+            settled = None
+        elif settled is None:
+            settled = k * dt
+    assert settled is not None, f"never settled at {goal}"
+    return peak, settled
+
+
+@STEPS
+@pytest.mark.parametrize("altitude", [2.5, 5.0, 10.0])
+def test_takeoff_stops_at_its_altitude_without_overshoot(altitude, dt):
+    f = _flight()
+    f.arm(0.0)
+    f.takeoff(altitude)
+    peak, settled = _approach(f, 0.0, 20.0, dt, axis=2, goal=altitude)
+    a = f.mass.airframe
+    assert peak <= altitude + OVERSHOOT
+    # No sluggish cure: there within five response times of the quickest climb the limits allow.
+    assert settled <= _quickest(altitude, a.max_climb, a.max_accel) + 5 * a.response
+    assert (f.main, f.sub) == (MainMode.AUTO, SubMode.LOITER)
+
+
+@STEPS
+def test_reposition_stops_at_its_target_without_overshoot(dt):
+    f = _flight()
+    f.arm(0.0)
+    f.takeoff(10.0)
+    t = _run(f, 0.0, 10.0, dt)
+    start = f.body.position.copy()
+    f.reposition(start[0] + 20.0, start[1], 10.0)
+    peak, settled = _approach(f, t, 20.0, dt, axis=0, goal=start[0] + 20.0)
+    a = f.mass.airframe
+    assert peak <= start[0] + 20.0 + OVERSHOOT
+    assert settled <= _quickest(20.0, a.max_speed, a.max_accel) + 5 * a.response
+    assert abs(f.body.position[1] - start[1]) < 0.05 and abs(f.body.position[2] - 10.0) < 0.05
 
 
 # ---------------------------------------------------------------------- over UDP
@@ -315,7 +372,7 @@ def test_ground_station_liveliness_loss_triggers_the_failsafe_at_once():
     agent.peer(keys.alive(GAME, "walker", "attacker"), False, 10.0)
     assert agent.failsafe_at is None  # somebody else leaving is not a lost link
     agent.peer(keys.alive(GAME, "ground-station", "gs"), False, 10.0)
-    assert agent.failsafe_at == 10.0 and autopilot.flight.sub == Sub.RTL
+    assert agent.failsafe_at == 10.0 and autopilot.flight.sub == SubMode.RTL
 
 
 def test_two_uavs_fly_at_once():
@@ -399,7 +456,7 @@ def test_a_live_search_game_flies_the_uav_through_mavsdk_and_leaves_no_process(t
     """``bearcat run`` on the search scenario: a vehicle emulator and a UAV peer
     beside the ground station and the walkers, the UAV armed, flown and
     tasked over MAVLink and Zenoh; every process gone at the end."""
-    from bearcat.agents.ground_station.recorder import read_events
+    from bearcat.agents.ground_station.event_log import read_events
     from bearcat.scenarios.schema import load_scenario
 
     # The 35-point game the search-game tests solve too, from the same cache.

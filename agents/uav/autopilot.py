@@ -22,10 +22,11 @@ from typing import Protocol
 import numpy as np
 
 from bearcat.agents.uav.airframe import Airframe
-from bearcat.agents.uav.flight import Flight, Main, Sub
+from bearcat.agents.uav.flight import Flight, MainMode, SubMode
 from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 log = logging.getLogger("bearcat.uav")
+TAKE_OFF_WAIT = 10.0  # s a reposition waits for a vehicle that was told to take off to leave the ground
 
 
 @dataclass(frozen=True)
@@ -62,12 +63,12 @@ class Autopilot(Protocol):
 
 
 MODE_NAMES = {
-    (Main.AUTO, Sub.READY): "ready",
-    (Main.AUTO, Sub.TAKEOFF): "takeoff",
-    (Main.AUTO, Sub.LOITER): "hold",
-    (Main.AUTO, Sub.MISSION): "mission",
-    (Main.AUTO, Sub.RTL): "return",
-    (Main.AUTO, Sub.LAND): "land",
+    (MainMode.AUTO, SubMode.READY): "ready",
+    (MainMode.AUTO, SubMode.TAKEOFF): "takeoff",
+    (MainMode.AUTO, SubMode.LOITER): "hold",
+    (MainMode.AUTO, SubMode.MISSION): "mission",
+    (MainMode.AUTO, SubMode.RTL): "return",
+    (MainMode.AUTO, SubMode.LAND): "land",
 }
 
 
@@ -91,7 +92,7 @@ class SimulatedAutopilot:
         lat, lon = to_geodetic(b.position[0], b.position[1], self.home)
         speed = float(np.hypot(*b.velocity[:2]))
         heading = bearing(b.velocity[0], b.velocity[1]) if speed > 0.2 else None
-        mode = "offboard" if f.main == Main.OFFBOARD else MODE_NAMES.get((f.main, f.sub), "other")
+        mode = "offboard" if f.main == MainMode.OFFBOARD else MODE_NAMES.get((f.main, f.sub), "other")
         return VehicleState(lat, lon, float(b.position[2]), speed, heading, f.armed, f.in_air, mode, b.battery)
 
     def take_off(self, altitude: float) -> None:
@@ -106,8 +107,8 @@ class SimulatedAutopilot:
     def velocity(self, east: float, north: float, up: float) -> None:
         now = self._now or 0.0
         self.flight.offboard(now, "velocity", (east, north, up))
-        if self.flight.main != Main.OFFBOARD:
-            self._check("offboard", self.flight.set_mode(Main.OFFBOARD, 0, now))
+        if self.flight.main != MainMode.OFFBOARD:
+            self._check("offboard", self.flight.set_mode(MainMode.OFFBOARD, 0, now))
 
     def hold(self) -> None:
         self._check("hold", self.flight.hold())
@@ -211,7 +212,7 @@ class MavsdkAutopilot:
         home = self._state.get("position")
         base = 0.0 if home is None else home.absolute_altitude_m - home.relative_altitude_m
         self._leave_offboard()
-        self._do("go to", self.action.goto_location, lat, lon, base + altitude, float("nan"))
+        self._do("go to", self._goto_when_flying, lat, lon, base + altitude)
 
     def velocity(self, east: float, north: float, up: float) -> None:
         """An offboard velocity setpoint; MAVSDK repeats the latest at 20 Hz,
@@ -246,6 +247,15 @@ class MavsdkAutopilot:
     def _do(self, what: str, call, *args) -> None:
         if self._queue is not None:
             self._queue.put_nowait((what, call, args))
+
+    async def _goto_when_flying(self, lat: float, lon: float, amsl: float) -> None:
+        """PX4 takes a reposition only in the air, so one sent straight after
+        the take-off waits (a while at most) until the vehicle says it is up."""
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + TAKE_OFF_WAIT
+        while not self._state.get("in_air") and loop.time() < deadline:
+            await asyncio.sleep(0.05)
+        await self.action.goto_location(lat, lon, amsl, float("nan"))
 
     async def _work(self) -> None:
         while True:

@@ -26,8 +26,8 @@ OFFBOARD_TIMEOUT = 1.0  # s without a setpoint before offboard is lost (COM_OF_L
 BATTERY_LAND = 0.05  # land at this charge (BAT_EMERGEN_THR)
 
 
-class Main(IntEnum):
-    """PX4 main modes (custom_mode bits 16-23)."""
+class MainMode(IntEnum):
+    """PX4's custom main mode (bits 16-23 of HEARTBEAT's custom_mode)."""
 
     MANUAL = 1
     ALTCTL = 2
@@ -38,8 +38,8 @@ class Main(IntEnum):
     STABILIZED = 7
 
 
-class Sub(IntEnum):
-    """PX4 AUTO sub-modes (custom_mode bits 24-31)."""
+class SubMode(IntEnum):
+    """PX4's AUTO sub mode (bits 24-31 of custom_mode)."""
 
     NONE = 0
     READY = 1
@@ -50,8 +50,8 @@ class Sub(IntEnum):
     LAND = 6
 
 
-class Landed(IntEnum):
-    """MAV_LANDED_STATE."""
+class LandedState(IntEnum):
+    """Whether the vehicle is on the ground, in the air or between (MAV_LANDED_STATE)."""
 
     ON_GROUND = 1
     IN_AIR = 2
@@ -59,8 +59,8 @@ class Landed(IntEnum):
     LANDING = 4
 
 
-class Result(IntEnum):
-    """MAV_RESULT."""
+class CommandResult(IntEnum):
+    """What the vehicle answers a command with (MAV_RESULT)."""
 
     ACCEPTED = 0
     TEMPORARILY_REJECTED = 1
@@ -83,7 +83,7 @@ class Flight:
         self.mass = PointMass(airframe, Body.at_rest(*start), rng)
         self.home = np.array([start[0], start[1], 0.0])
         self.armed = False
-        self.main, self.sub = Main.AUTO, Sub.LOITER
+        self.main, self.sub = MainMode.AUTO, SubMode.LOITER
         self.target: np.ndarray | None = None
         self.setpoint: tuple[float, str, np.ndarray] | None = None  # (time, "velocity"|"position", vector)
         self._armed_at = 0.0
@@ -97,93 +97,93 @@ class Flight:
         return self.mass.body
 
     @property
-    def landed(self) -> Landed:
+    def landed(self) -> LandedState:
         z, vz = self.body.position[2], self.body.velocity[2]
         if z <= 0.05 and abs(vz) < 0.05:
-            return Landed.ON_GROUND
-        if self.main == Main.AUTO and self.sub == Sub.TAKEOFF:
-            return Landed.TAKEOFF
-        if self.main == Main.AUTO and self.sub == Sub.LAND:
-            return Landed.LANDING
-        return Landed.IN_AIR
+            return LandedState.ON_GROUND
+        if self.main == MainMode.AUTO and self.sub == SubMode.TAKEOFF:
+            return LandedState.TAKEOFF
+        if self.main == MainMode.AUTO and self.sub == SubMode.LAND:
+            return LandedState.LANDING
+        return LandedState.IN_AIR
 
     @property
     def in_air(self) -> bool:
-        return self.landed != Landed.ON_GROUND
+        return self.landed != LandedState.ON_GROUND
 
     # ------------------------------------------------------------- commands
 
-    def arm(self, now: float) -> Result:
+    def arm(self, now: float) -> CommandResult:
         if self.body.battery <= BATTERY_LAND:
-            return Result.DENIED
+            return CommandResult.DENIED
         if not self.armed:
             self.armed, self._armed_at = True, now
             self._touched_at = None
-        return Result.ACCEPTED
+        return CommandResult.ACCEPTED
 
-    def disarm(self, force: bool = False) -> Result:
+    def disarm(self, force: bool = False) -> CommandResult:
         if self.in_air and not force:
-            return Result.DENIED
+            return CommandResult.DENIED
         self.armed = False
         self.target = None
-        return Result.ACCEPTED
+        return CommandResult.ACCEPTED
 
-    def takeoff(self, altitude: float | None = None) -> Result:
+    def takeoff(self, altitude: float | None = None) -> CommandResult:
         if not self.armed:
-            return Result.DENIED
+            return CommandResult.DENIED
         z = self.params.takeoff_alt if altitude is None or not np.isfinite(altitude) else float(altitude)
         self.target = np.array([self.body.position[0], self.body.position[1], max(z, 1.0)])
-        self.main, self.sub = Main.AUTO, Sub.TAKEOFF
-        return Result.ACCEPTED
+        self.main, self.sub = MainMode.AUTO, SubMode.TAKEOFF
+        return CommandResult.ACCEPTED
 
-    def set_mode(self, main: int, sub: int, now: float) -> Result:
+    def set_mode(self, main: int, sub: int, now: float) -> CommandResult:
         try:
-            main, sub = Main(main), Sub(sub)
+            main, sub = MainMode(main), SubMode(sub)
         except ValueError:
-            return Result.DENIED
-        if main == Main.OFFBOARD:
+            return CommandResult.DENIED
+        if main == MainMode.OFFBOARD:
             if self.setpoint is None or now - self.setpoint[0] > OFFBOARD_TIMEOUT:
-                return Result.DENIED
-            self.main, self.sub = main, Sub.NONE
-            return Result.ACCEPTED
-        if main != Main.AUTO:
-            return Result.DENIED  # manual modes need a pilot on sticks
-        if sub == Sub.LOITER:
+                return CommandResult.DENIED
+            self.main, self.sub = main, SubMode.NONE
+            return CommandResult.ACCEPTED
+        if main != MainMode.AUTO:
+            return CommandResult.DENIED  # manual modes need a pilot on sticks
+        if sub == SubMode.LOITER:
             return self.hold()
-        if sub == Sub.LAND:
+        if sub == SubMode.LAND:
             return self.land()
-        if sub == Sub.RTL:
+        if sub == SubMode.RTL:
             return self.return_home()
-        if sub == Sub.TAKEOFF:
+        if sub == SubMode.TAKEOFF:
             return self.takeoff()
-        return Result.DENIED
+        return CommandResult.DENIED
 
-    def hold(self) -> Result:
-        self.main, self.sub = Main.AUTO, Sub.LOITER
+    def hold(self) -> CommandResult:
+        self.main, self.sub = MainMode.AUTO, SubMode.LOITER
         self.target = self.body.position.copy() if self.in_air else None
-        return Result.ACCEPTED
+        return CommandResult.ACCEPTED
 
-    def reposition(self, east: float, north: float, up: float | None) -> Result:
+    def reposition(self, east: float, north: float, up: float | None) -> CommandResult:
         if not self.armed or not self.in_air:
-            return Result.DENIED
+            return CommandResult.DENIED
         z = self.body.position[2] if up is None or not np.isfinite(up) else float(up)
         self.target = np.array([east, north, max(z, 1.0)])
-        self.main, self.sub = Main.AUTO, Sub.LOITER
-        return Result.ACCEPTED
+        self.main, self.sub = MainMode.AUTO, SubMode.LOITER
+        return CommandResult.ACCEPTED
 
-    def land(self) -> Result:
+    def land(self) -> CommandResult:
         if not self.armed:
-            return Result.DENIED
-        self.main, self.sub = Main.AUTO, Sub.LAND
+            return CommandResult.DENIED
+        self.main, self.sub = MainMode.AUTO, SubMode.LAND
         self.target = np.array([self.body.position[0], self.body.position[1], 0.0])
-        return Result.ACCEPTED
+        return CommandResult.ACCEPTED
 
-    def return_home(self) -> Result:
+    def return_home(self) -> CommandResult:
         if not self.armed or not self.in_air:
-            return Result.DENIED
-        self.main, self.sub = Main.AUTO, Sub.RTL
+            return CommandResult.DENIED
+        self.main, self.sub = MainMode.AUTO, SubMode.RTL
         self.target = None
-        return Result.ACCEPTED
+        return CommandResult.ACCEPTED
 
     def offboard(self, now: float, kind: str, vector) -> None:
         """An offboard setpoint: a velocity (east, north, up) or a position."""
@@ -197,35 +197,35 @@ class Flight:
         if not self.armed:
             self.mass.step(dt, motors=False)
             return
-        if self.main == Main.OFFBOARD and self.setpoint is not None:
+        if self.main == MainMode.OFFBOARD and self.setpoint is not None:
             _, kind, vector = self.setpoint
             if kind == "velocity":
                 self.mass.step(dt, velocity=vector)
             else:
                 self.mass.step(dt, target=vector)
-        elif self.sub == Sub.RTL:
+        elif self.sub == SubMode.RTL:
             self.mass.step(dt, target=self._rtl_leg())
         elif self.target is not None:
-            self.mass.step(dt, target=self.target)
+            self.mass.step(dt, target=self.target, landing=self.sub == SubMode.LAND)
         else:
             self.mass.step(dt, velocity=np.zeros(3))
 
     def _autonomy(self, now: float) -> None:
         """What PX4 does without being asked."""
-        if self.sub == Sub.TAKEOFF and self.target is not None and self.mass.at(self.target):
-            self.main, self.sub = Main.AUTO, Sub.LOITER
-        if self.main == Main.OFFBOARD and (self.setpoint is None or now - self.setpoint[0] > OFFBOARD_TIMEOUT):
+        if self.sub == SubMode.TAKEOFF and self.target is not None and self.mass.at(self.target):
+            self.main, self.sub = MainMode.AUTO, SubMode.LOITER
+        if self.main == MainMode.OFFBOARD and (self.setpoint is None or now - self.setpoint[0] > OFFBOARD_TIMEOUT):
             self.hold()
             self.note = "offboard setpoints stopped: holding"
-        if self.in_air and self.body.battery <= BATTERY_LAND and self.sub != Sub.LAND:
+        if self.in_air and self.body.battery <= BATTERY_LAND and self.sub != SubMode.LAND:
             self.land()
             self.note = "battery empty: landing"
-        if self.landed == Landed.ON_GROUND and self.sub not in (Sub.TAKEOFF,):
-            if self.sub == Sub.LAND or self._touched_at is not None:
+        if self.landed == LandedState.ON_GROUND and self.sub not in (SubMode.TAKEOFF,):
+            if self.sub == SubMode.LAND or self._touched_at is not None:
                 self._touched_at = now if self._touched_at is None else self._touched_at
                 if now - self._touched_at >= DISARM_LANDED:
                     self.disarm()
-                    self.main, self.sub = Main.AUTO, Sub.LOITER
+                    self.main, self.sub = MainMode.AUTO, SubMode.LOITER
                     self._touched_at = None
             elif now - self._armed_at >= DISARM_PREFLIGHT:
                 self.disarm()

@@ -22,7 +22,7 @@ import math
 
 from pymavlink.dialects.v20 import common as mav
 
-from bearcat.agents.uav.flight import Flight, Main, Result
+from bearcat.agents.uav.flight import CommandResult, Flight, MainMode
 from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 # Telemetry streams and their periods (s), PX4's defaults on a telemetry link.
@@ -112,12 +112,12 @@ class Px4Face:
                 mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: self._version,
                 mav.MAVLINK_MSG_ID_HOME_POSITION: self._home_position,
             }.get(wanted)
-            result = Result.UNSUPPORTED if reply is None else Result.ACCEPTED
+            result = CommandResult.UNSUPPORTED if reply is None else CommandResult.ACCEPTED
             extra = [] if reply is None else [reply(now)]
         elif c == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            result = Result.ACCEPTED  # the streams keep PX4's default rates
+            result = CommandResult.ACCEPTED  # the streams keep PX4's default rates
         else:
-            result = Result.UNSUPPORTED
+            result = CommandResult.UNSUPPORTED
         ack = mav.MAVLink_command_ack_message(
             c, int(result), 0, 0, target_system=msg.get_srcSystem(), target_component=msg.get_srcComponent()
         )
@@ -146,7 +146,7 @@ class Px4Face:
     def _heartbeat(self, now: float):
         f = self.flight
         base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if f.armed else 0)
-        custom = (int(f.main) << 16) | (int(f.sub) << 24 if f.main == Main.AUTO else 0)
+        custom = (int(f.main) << 16) | (int(f.sub) << 24 if f.main == MainMode.AUTO else 0)
         status = mav.MAV_STATE_ACTIVE if f.armed else mav.MAV_STATE_STANDBY
         return mav.MAVLink_heartbeat_message(mav.MAV_TYPE_QUADROTOR, mav.MAV_AUTOPILOT_PX4, base, custom, status, 3)
 

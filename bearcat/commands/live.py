@@ -27,7 +27,8 @@ def register(subparsers) -> None:
 
     view = subparsers.add_parser(
         "view",
-        description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing).",
+        description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing), "
+        "or save a picture of it at a game time.",
     )
     view.add_argument(
         "run_dir", metavar="RUN", type=Path, help="a run directory (bearcat run --out, bearcat simulate --out)"
@@ -37,6 +38,12 @@ def register(subparsers) -> None:
         type=Path,
         metavar="PNG",
         help="render headless to this PNG instead of opening a window (needs a Vulkan driver such as mesa's)",
+    )
+    view.add_argument(
+        "--at",
+        type=arguments.non_negative,
+        metavar="SECONDS",
+        help="with --screenshot: the game time to show, in seconds from the start (default: the end)",
     )
     view.set_defaults(run=run_view)
 
@@ -122,7 +129,7 @@ def run_live(args) -> int:
 
 
 def run_view(args) -> int:
-    from bearcat.agents.ground_station.recording import write_recording
+    from bearcat.agents.ground_station.rerun_recording import write_recording
     from bearcat.maps import read_geojson
 
     rrd = args.run_dir / "recording.rrd"
@@ -134,7 +141,13 @@ def run_view(args) -> int:
             )
         write_recording(events, read_geojson(map_file), rrd, name=args.run_dir.name)
     if args.screenshot is not None:
-        return _open_viewer(rrd, "--headless", "--screenshot-to", str(args.screenshot), "--window-size", "1280x720")
+        from bearcat.screenshot import screenshot
+
+        shown = screenshot(rrd, args.screenshot, at=args.at)
+        print(f"{args.screenshot}: {args.run_dir} at {shown:.1f} s of game time")
+        return 0
+    if args.at is not None:
+        raise arguments.UsageError("--at needs --screenshot: the viewer's time line sets the time of an open window")
     return _open_viewer(rrd)
 
 

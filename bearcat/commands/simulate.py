@@ -17,7 +17,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from bearcat import arguments
-from bearcat.agents.ground_station.recording import finish_run
+from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.output import Output
 from bearcat.scenarios.schema import list_scenarios, load_scenario
 from bearcat.scenarios.simulate import simulate
@@ -63,7 +63,7 @@ def run(args) -> int:
             record = asdict(outcome)
             if events is not None:
                 (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")
-                finish_run(events.parent, scenario.map, scenario.name)
+                finish_run(events.parent, scenario)
         tally[outcome.winner or "none"] += 1
         who = f"{outcome.winner} wins" if outcome.winner else "no winner"
         out.say(f"seed {seed}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
