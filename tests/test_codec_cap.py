@@ -6,8 +6,8 @@ import msgspec
 import numpy as np
 import pytest
 
-from bearcat.agents.ground_station.guidance.outlines import on_the_wire
 from bearcat.agents.ground_station.event_log import read_events
+from bearcat.agents.ground_station.guidance.outlines import on_the_wire
 from bearcat.bus import keys
 from bearcat.bus.codec import MAX_PAYLOAD, Refused, decode, encode
 from bearcat.bus.messages import OUTLINE_LINES, OUTLINE_POINTS, Guidance, Report
