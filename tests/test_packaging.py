@@ -5,6 +5,7 @@ distributions on the package index; a wheel that installed them would be
 overwritten by (or overwrite) those.
 """
 
+import shutil
 import subprocess
 import sys
 import zipfile
@@ -18,9 +19,14 @@ FOLDERS = ("agents", "bus", "maps", "netem", "scenarios", "solvers")
 
 @pytest.fixture(scope="module")
 def wheel(tmp_path_factory) -> Path:
+    """The wheel built from a copy of the sources, so the build leaves nothing in the checkout."""
+    source = tmp_path_factory.mktemp("source") / "bearcat"
+    shutil.copytree(
+        ROOT, source, ignore=shutil.ignore_patterns(".git", ".venv", "build", "*.egg-info", "__pycache__", "runs")
+    )
     out = tmp_path_factory.mktemp("wheel")
     subprocess.run(
-        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(ROOT)],
+        [sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(out), str(source)],
         check=True,
         capture_output=True,
         timeout=300,
