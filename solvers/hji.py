@@ -259,6 +259,11 @@ def solve_reach_avoid(
             steps += n_steps
             t += window
             change = float(kern.max_abs_difference(buffers[0], snapshot))
+            if math.isnan(change):
+                raise InputError(
+                    f"the value function stopped being finite by t = {t:g}: the dynamics are too fast for the "
+                    "grid's numbers (an overflow), so no set was computed"
+                )
             if progress is not None:
                 progress(t, change)
             if window >= check_every and change < tol:

@@ -476,10 +476,14 @@ def _record(o_run, u_run, pl, pr, na, nb, offset, t_old, dt, tstar, tgrad):
 
 @njit(cache=True)
 def max_abs_difference(a, b):
-    """``max |a - b|`` over two flat arrays."""
+    """``max |a - b|`` over two flat arrays; NaN as soon as either holds a
+    number that is not finite, which ``max`` would otherwise pass over."""
     mx = 0.0
     for i in range(a.shape[0]):
-        mx = max(mx, abs(np.float64(a[i]) - np.float64(b[i])))
+        d = abs(np.float64(a[i]) - np.float64(b[i]))
+        if not d < np.inf:
+            return np.nan
+        mx = max(mx, d)
     return mx
 
 
