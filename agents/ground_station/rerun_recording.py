@@ -102,6 +102,8 @@ def write_recording(
     for root in FIELD_ROOTS:
         rec.log(root, _north_up(rr), static=True)
     _log_map(rec, rr, game_map)
+    for agent in sorted({m["agent"] for m in sent.values() if m["type"] == "guidance" and m.get("value") is not None}):
+        rec.log(f"game/value/{agent}", rr.SeriesLines(colors=[markers.colour(agent)], names=[agent]), static=True)
     for e in events:
         rec.set_time("game_time", duration=max(e["t"] - start, 0.0))
         kind = e["event"]
@@ -111,9 +113,7 @@ def write_recording(
                 drawn = markers.draw([(m["agent"], to_local(m["lat"], m["lon"]))])
                 rec.log(f"ground/truth/{m['agent']}", drawn[markers.shape(m["agent"])])
             elif m["type"] == "state":
-                rec.log(
-                    "game/state", rr.TextLog(f"{m['phase']}: {m.get('winner') or ''} {m.get('reason', '')}".strip())
-                )
+                rec.log("game/state", rr.TextLog(_state_line(m)))
             elif m["type"] == "fix" and e["sender"] != "launcher":
                 _log_fix(rec, rr, m, to_local, markers)
             elif m["type"] == "uav-task":
@@ -296,3 +296,13 @@ def _log_screen(rec, rr, m, to_local, markers: _Markers) -> None:
             rec.log(f"{base}/heading", rr.Arrows2D(origins=[me], vectors=[arrow], colors=[markers.colour(agent)]))
     if m.get("value") is not None:
         rec.log(f"game/value/{agent}", rr.Scalars(m["value"]))
+
+
+def _state_line(state: dict) -> str:
+    """A referee state as the log shows it: ``ended: attacker wins (attacker returned the flag)``."""
+    line = state["phase"]
+    if state.get("winner"):
+        line += f": {state['winner']} wins"
+    if state.get("reason"):
+        line += f" ({state['reason']})"
+    return line
