@@ -22,21 +22,19 @@ tell a late fix from a lost one.
 
 from __future__ import annotations
 
-import zlib
 from collections.abc import Callable
 from dataclasses import dataclass
 
-import numpy as np
 import shapely
 
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
+from bearcat.netem.link import LinkState, link_rng
 from bearcat.netem.models import LinkModel
 
 # Keys the shim never impairs: the simulation's ground truth, the launcher's
 # control channel (a local wire in the field) and liveliness.
 EXEMPT_KINDS = ("truth", "control", "alive", "map", "scenario")
-_MAX_TRIES = 50
 
 
 @dataclass(frozen=True)
@@ -62,17 +60,6 @@ class Impairment:
     reasons: tuple[str, ...] = ()
 
 
-class _Link:
-    __slots__ = ("bad", "busy_until", "last_reliable", "last_sent", "rng")
-
-    def __init__(self, rng: np.random.Generator) -> None:
-        self.rng = rng
-        self.bad = False
-        self.last_sent = -np.inf
-        self.busy_until = -np.inf
-        self.last_reliable = -np.inf
-
-
 class Shim:
     """Applies ``model`` to every directed link between distinct peers.
 
@@ -80,7 +67,10 @@ class Shim:
     ``where(peer)`` the peer's true position there (None for a peer that has
     none, like the ground station); ``record`` receives every Impairment;
     links between two ``colocated`` peers (the ground station's services on
-    one laptop) are never impaired."""
+    one laptop) are never impaired. ``epoch`` is when the game started on
+    the clock ``now`` is read from (0 in simulation's game time); the
+    model's outage windows count from it, and none applies while it is None
+    (a live peer learns it from the start command)."""
 
     def __init__(
         self,
@@ -91,6 +81,7 @@ class Shim:
         where: Callable[[str], tuple[float, float] | None] | None = None,
         record: Callable[[Impairment], None] | None = None,
         colocated: tuple[str, ...] = (),
+        epoch: float | None = 0.0,
     ) -> None:
         if dead_zones is not None and where is None:
             raise BusError("dead zones need a 'where' that gives each peer's position")
@@ -102,15 +93,14 @@ class Shim:
         self.where = where
         self.record = record or (lambda impairment: None)
         self.colocated = tuple(colocated)
-        self._links: dict[tuple[str, str], _Link] = {}
+        self.epoch = epoch
+        self._links: dict[tuple[str, str], LinkState] = {}
         self._held: list[tuple] = []
 
-    def link(self, sender: str, receiver: str) -> _Link:
+    def link(self, sender: str, receiver: str) -> LinkState:
         state = self._links.get((sender, receiver))
         if state is None:
-            spawn = (zlib.crc32(sender.encode()), zlib.crc32(receiver.encode()))
-            state = _Link(np.random.default_rng(np.random.SeedSequence(self.seed, spawn_key=spawn)))
-            self._links[(sender, receiver)] = state
+            state = self._links[(sender, receiver)] = LinkState(self.model, link_rng(self.seed, sender, receiver))
         return state
 
     def transmit(self, sender: str, receiver: str, key: str, payload: bytes, now: float, token=None) -> list[Delivery]:
@@ -147,57 +137,17 @@ class Shim:
     # ------------------------------------------------------------------ internals
 
     def _send(self, sender, receiver, key, payload, sent, now, reliable) -> list[Delivery]:
-        m, link = self.model, self.link(sender, receiver)
-        rng, reasons = link.rng, []
-        start = now
-        for outage in m.outages:
-            if outage.covers(start):
-                if not reliable:
-                    self._log(sent, sender, receiver, key, payload, "dropped", None, ("outage",))
-                    return []
-                start, reasons = outage.end, [*reasons, "outage"]
-        if m.idle_after > 0 and start - link.last_sent > m.idle_after and np.isfinite(link.last_sent):
-            start += rng.uniform(*m.promotion)
-            reasons.append("promotion")
-        link.last_sent = start
-        if m.rate > 0:
-            start = max(start, link.busy_until) + len(payload) / m.rate
-            link.busy_until = start
-        tries = 0
-        while self._lost(link):
-            if not reliable:
-                why = "burst" if link.bad else "loss"
-                self._log(sent, sender, receiver, key, payload, "dropped", None, (why,))
-                return []
-            tries += 1
-            if tries >= _MAX_TRIES:
-                break
-            start += m.retransmit
-        if tries:
-            reasons.append(f"retransmitted x{tries}")
+        game_time = None if self.epoch is None else now - self.epoch
+        fate = self.link(sender, receiver).carry(now, len(payload), reliable=reliable, game_time=game_time)
+        if fate.lost is not None:
+            self._log(sent, sender, receiver, key, payload, "dropped", None, (fate.lost,))
+            return []
         arrivals = []
-        for copy in (0, 1):
-            if copy == 1 and not rng.random() < m.duplicate:
-                break
-            skip = not reliable and m.reorder > 0 and rng.random() < m.reorder
-            at = start + (m.delay.sample(rng) - (m.delay.base if skip else 0.0))
-            why = [*reasons, "reordered"] if skip else list(reasons)
-            if reliable:
-                at = max(at, link.last_reliable)
-                link.last_reliable = at
-            arrivals.append(Delivery(at, payload, copy))
+        for copy, c in enumerate(fate.copies):
+            arrivals.append(Delivery(c.at, payload, copy))
             action = "duplicated" if copy else "delivered"
-            self._log(sent, sender, receiver, key, payload, action, at - sent, tuple(why))
+            self._log(sent, sender, receiver, key, payload, action, c.at - sent, c.reasons)
         return arrivals
-
-    def _lost(self, link: _Link) -> bool:
-        m, rng = self.model, link.rng
-        lost = m.loss > 0 and rng.random() < m.loss
-        if m.burst is not None:
-            b = m.burst
-            link.bad = (rng.random() >= b.r) if link.bad else (rng.random() < b.p)
-            lost = lost or rng.random() < (b.loss_bad if link.bad else b.loss_good)
-        return lost
 
     def _dead(self, sender: str, receiver: str) -> bool:
         if self.dead_zones is None:

@@ -51,6 +51,8 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
             if isinstance(message, GameState) and message.phase == "ended" and not finished.is_set():
                 why["reason"] = f"game ended: {message.reason}"
                 loop.call_later(LINGER, finished.set)
+            if isinstance(message, Control) and message.command == "start" and shim is not None:
+                shim.epoch = message.t  # outage windows count from the start, on the launcher's clock
             if isinstance(message, Control) and message.command == "stop":
                 why["reason"] = f"stopped by the launcher: {message.reason}"
                 loop.call_later(LINGER, finished.set)
@@ -215,6 +217,7 @@ def start_peer(
             where=positions.get if zones is not None else None,
             record=record.impaired,
             colocated=GROUND_PEERS,
+            epoch=None,
         )
         keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
         if keyboard:
