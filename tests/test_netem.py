@@ -109,6 +109,18 @@ def test_an_outage_drops_fixes_and_holds_state_until_it_ends():
     assert shim.transmit("a1", "gs", FIX, PAYLOAD, 3.0)[0].at == pytest.approx(3.1)
 
 
+def test_outage_windows_count_from_the_game_start_on_a_live_clock():
+    """Live peers read Unix time; the windows are game time, from the start command."""
+    model = LinkModel(delay=Delay(0.1), outages=(Outage(1.0, 3.0),))
+    before_start = Shim(model, seed=7, epoch=None)
+    assert before_start.transmit("a1", "gs", FIX, PAYLOAD, 1_700_000_002.0)  # no game yet, no window
+    live = Shim(model, seed=7, epoch=1_700_000_000.0)
+    assert live.transmit("a1", "gs", FIX, PAYLOAD, 1_700_000_002.0) == []
+    (held,) = live.transmit("gs", "a1", STATE, PAYLOAD, 1_700_000_002.0)
+    assert held.at == pytest.approx(1_700_000_003.1)
+    assert live.transmit("a1", "gs", FIX, PAYLOAD, 1_700_000_004.0)
+
+
 def test_a_dead_zone_cuts_a_phone_off_and_poll_releases_what_was_held():
     position = {"a1": (5.0, 5.0)}
     records = []
