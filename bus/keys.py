@@ -118,6 +118,16 @@ def every(game: str, kind: str) -> str:
     return _key(game, *chunks)
 
 
+def any_game(kind: str) -> str:
+    """The key expression matching every key of ``kind`` in every game."""
+    if kind not in _KINDS:
+        raise BusError(f"there is no key kind {kind!r}; the kinds are {', '.join(_KINDS)}")
+    return "/".join((ROOT, "*", *("*" if c == "{}" else c for c in _KINDS[kind])))
+
+
+KINDS = tuple(_KINDS)
+
+
 def game_wide(game: str) -> str:
     """Every key of one game (the recorder's subscription)."""
     return _key(game, "**")

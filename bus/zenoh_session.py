@@ -11,6 +11,14 @@ delivered late in a burst); everything else reliable with BLOCK. Every put
 carries the sender's session name as its attachment, which is how the
 receiver's netem shim knows the directed link a message came over.
 
+Over TCP a best-effort put is still retransmitted by TCP: a lost packet
+stalls everything behind it and then arrives in a burst. A session given a
+second configuration for best-effort traffic (``best_effort``, typically a
+client of the same router over ``udp/``) sends fixes, guidance and truth
+there, where a lost packet is a lost fix, and everything else over the
+first; it subscribes to each kind of key on the session that kind travels
+on, so no message arrives twice.
+
 Subscriber callbacks run on a Zenoh-owned thread: they must be short (the
 live runtime's hand the sample to its asyncio loop and return), and an
 exception in one is logged and counted in ``callback_errors``, never lost
@@ -71,18 +79,23 @@ def config(
 
 
 class ZenohSession:
-    """One peer's Zenoh session, named ``name`` (the sender id on its puts)."""
+    """One peer's Zenoh session, named ``name`` (the sender id on its puts);
+    with ``best_effort``, a second one for the best-effort kinds of key."""
 
-    def __init__(self, name: str, zconfig: zenoh.Config | None = None) -> None:
+    def __init__(
+        self, name: str, zconfig: zenoh.Config | None = None, *, best_effort: zenoh.Config | None = None
+    ) -> None:
         self.name = keys.check_name(name, "session name")
         self.closed = False
         self.callback_errors = 0
         self._lock = threading.Lock()
-        zconfig = zconfig if zconfig is not None else config()
+        self._opened: list[zenoh.Session] = []
         try:
-            self._session = zenoh.open(zconfig)
-        except zenoh.ZError as exc:
-            raise BusError(_refusal(self.name, zconfig, exc)) from None
+            self._session = self._open(zconfig if zconfig is not None else config())
+            self._best_effort = self._session if best_effort is None else self._open(best_effort)
+        except BusError:
+            self._close_sessions()
+            raise
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
         self._declared: list = []  # subscribers and tokens, undeclared on close
         self._attachment = self.name.encode()
@@ -97,7 +110,7 @@ class ZenohSession:
         self._check_open()
         publisher = self._publishers.get((key, reliable))
         if publisher is None:
-            publisher = self._session.declare_publisher(
+            publisher = (self._session if reliable else self._best_effort).declare_publisher(
                 key,
                 reliability=zenoh.Reliability.RELIABLE if reliable else zenoh.Reliability.BEST_EFFORT,
                 congestion_control=zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP,
@@ -106,16 +119,33 @@ class ZenohSession:
         publisher.put(bytes(payload), attachment=self._attachment)
 
     def subscribe(self, key_expr: str, callback: Callback) -> None:
+        """Call ``callback(key, payload, sender)`` for every sample on ``key_expr``."""
         self._check_open()
+        if self._best_effort is self._session:
+            self._declare_subscriber(self._session, key_expr, callback, lambda key: True)
+            return
+        reliable, best_effort = _reliabilities(key_expr)
+        if reliable:
+            self._declare_subscriber(self._session, key_expr, callback, _travels_reliably)
+        if best_effort:
+            self._declare_subscriber(self._best_effort, key_expr, callback, lambda key: not _travels_reliably(key))
+
+    def _declare_subscriber(self, session, key_expr: str, callback: Callback, travels_here) -> None:
+        """A subscriber on ``session`` that passes on the samples whose key
+        ``travels_here``: the same sample reaches both sessions of a peer
+        subscribed on both, and only one of them may deliver it."""
 
         def on_sample(sample: zenoh.Sample) -> None:
             try:
+                key = str(sample.key_expr)
+                if not travels_here(key):
+                    return
                 sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else ""
-                callback(str(sample.key_expr), sample.payload.to_bytes(), sender)
+                callback(key, sample.payload.to_bytes(), sender)
             except Exception:
                 self._callback_failed(key_expr)
 
-        self._declared.append(self._session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample)))
+        self._declared.append(session.declare_subscriber(key_expr, zenoh.handlers.Callback(on_sample)))
 
     def declare_token(self, key: str) -> None:
         self._check_open()
@@ -170,7 +200,20 @@ class ZenohSession:
                 entity.undeclare()
             except zenoh.ZError:
                 pass
-        self._session.close()
+        self._close_sessions()
+
+    def _open(self, zconfig: zenoh.Config) -> zenoh.Session:
+        try:
+            session = zenoh.open(zconfig)
+        except zenoh.ZError as exc:
+            raise BusError(_refusal(self.name, zconfig, exc)) from None
+        self._opened.append(session)
+        return session
+
+    def _close_sessions(self) -> None:
+        for session in reversed(self._opened):
+            session.close()
+        self._opened.clear()
 
     def _callback_failed(self, key_expr: str) -> None:
         with self._lock:
@@ -180,6 +223,30 @@ class ZenohSession:
     def _check_open(self) -> None:
         if self.closed:
             raise BusError(f"session {self.name!r} is closed")
+
+
+def best_effort_endpoint(endpoint: str) -> str:
+    """The ``udp/`` endpoint at the address of ``endpoint``: where a router
+    listening on both takes best-effort traffic."""
+    _, _, address = endpoint.partition("/")
+    return f"udp/{address}"
+
+
+def _travels_reliably(key: str) -> bool:
+    """Whether ``key`` goes on the reliable session (anything not a game key of a best-effort kind)."""
+    try:
+        return keys.reliable(key)
+    except BusError:
+        return True
+
+
+def _reliabilities(key_expr: str) -> tuple[bool, bool]:
+    """Whether ``key_expr`` can match keys that travel reliably, and keys that travel best effort."""
+    expr = zenoh.KeyExpr(key_expr)
+    matches = {kind: expr.intersects(zenoh.KeyExpr(keys.any_game(kind))) for kind in keys.KINDS}
+    best_effort = any(matches[kind] for kind in keys.BEST_EFFORT_KINDS)
+    reliable = any(hit for kind, hit in matches.items() if kind not in keys.BEST_EFFORT_KINDS) or not best_effort
+    return reliable, best_effort
 
 
 def _refusal(name: str, zconfig: zenoh.Config, exc: zenoh.ZError) -> str:

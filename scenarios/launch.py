@@ -40,7 +40,7 @@ from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
-from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
 from bearcat.scenarios.dispatch import FAILED
 from bearcat.scenarios.schema import Scenario
 
@@ -90,7 +90,7 @@ def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
 
 
 def peer_command(
-    role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path
+    role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path, transport: str = "tcp"
 ) -> list[str]:
     return [
         sys.executable,
@@ -110,15 +110,27 @@ def peer_command(
         str(seed),
         "--netem",
         netem,
+        "--transport",
+        transport,
         "--out",
         str(out),
     ]
 
 
 def launch(
-    scenario: Scenario, scenario_ref: str, out: Path, *, seed: int, netem: str, say=print, startup: float = STARTUP
+    scenario: Scenario,
+    scenario_ref: str,
+    out: Path,
+    *,
+    seed: int,
+    netem: str,
+    transport: str | None = None,
+    say=print,
+    startup: float = STARTUP,
 ) -> LiveOutcome:
-    """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path)."""
+    """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
+    ``transport`` is how best-effort messages travel (default: the scenario's)."""
+    transport = transport or scenario.transport
     out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     port = free_port()
@@ -127,7 +139,7 @@ def launch(
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
     with (
-        ZenohSession("launcher", config(listen=[endpoint], mode="router")) as session,
+        ZenohSession("launcher", config(listen=[endpoint, best_effort_endpoint(endpoint)], mode="router")) as session,
         closing(EventLog(out / "events.jsonl")) as record,
     ):
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
@@ -176,16 +188,16 @@ def launch(
 
             roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
             for role, name in roles:
-                spawn(name, peer_command(role, scenario_ref, name, endpoint, seed, netem, out))
+                spawn(name, peer_command(role, scenario_ref, name, endpoint, seed, netem, out, transport))
             for k, uav in enumerate(scenario.uavs):
                 port = free_port(socket.SOCK_DGRAM)
                 spawn(f"vehicle-{uav.id}", vehicle_command(scenario, k, port))
                 fly = ["--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"]
-                spawn(uav.id, peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out) + fly)
+                spawn(uav.id, peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out, transport) + fly)
             for name in keyboard:
                 say(
                     f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
-                    + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out))
+                    + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out, transport))
                 )
             deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
             while True:

@@ -135,18 +135,21 @@ def start_peer(
     netem: str,
     out=None,
     mode="peer",
+    transport: str = "tcp",
     judge="truth",
     vehicle: str | None = None,
     sysid: int | None = None,
     emulated: bool = False,
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
+    With ``transport`` "udp" its best-effort messages go to the same
+    endpoints over ``udp/`` (see ``bus.zenoh_session``).
     A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
     an ``emulated`` vehicle's telemetry is the truth."""
     import shapely
 
     from bearcat.bus.errors import BusError
-    from bearcat.bus.zenoh_session import ZenohSession, config
+    from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import build_cast
     from bearcat.scenarios.schema import ScenarioError
@@ -193,7 +196,13 @@ def start_peer(
         listen = []  # a client does not listen
     with (
         closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl")) as record,
-        ZenohSession(name, config(listen=listen, connect=connect, mode=mode)) as session,
+        ZenohSession(
+            name,
+            config(listen=listen, connect=connect, mode=mode),
+            best_effort=None
+            if transport == "tcp"
+            else config(listen=[], connect=[best_effort_endpoint(e) for e in connect], mode="client"),
+        ) as session,
     ):
         if role == "ground-station":
             # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.

@@ -10,6 +10,7 @@ whether their phone shows reachability guidance::
     game = "ctf"                 # ctf | reach-avoid | pursuit
     time_limit = 60.0            # s of game time
     netem = "wifi"               # a profile of netem/profiles.toml
+    transport = "tcp"            # live runs: fixes and guidance over tcp (retransmitted) or udp (lost)
     seed = 0
 
     [rules]                      # per game: CtfRules, ReachAvoidRules, PursuitRules
@@ -69,6 +70,9 @@ MAX_CELLS = 2000
 Game = Literal[tuple(TEAMS)]
 Team = Literal[tuple(dict.fromkeys(team for teams in TEAMS.values() for team in teams))]
 ProfileName = Literal[tuple(load_profiles())]
+TRANSPORTS = ("tcp", "udp")
+"""How best-effort messages (fixes, guidance) travel in live runs; reliable ones always go over tcp."""
+Transport = Literal[TRANSPORTS]
 Coordinate = Annotated[float, Meta(ge=-1e7, le=1e7, extra={"unit": "m"})]
 Point = Annotated[tuple[Coordinate, Coordinate], Meta(description="[east, north] in metres")]
 Route = Annotated[tuple[Point, ...], Meta(min_length=1, description="a list of [east, north] points in metres")]
@@ -257,6 +261,7 @@ class ScenarioTable(_Table):
     time_limit: Annotated[float, Meta(gt=0.0, le=86400.0, extra={"unit": "s"})]
     description: str = ""
     netem: ProfileName = "ideal"
+    transport: Transport = "tcp"
     seed: Annotated[int, Meta(ge=0)] = 0
     dead_zones: Annotated[tuple[Ring, ...], Meta(description="a list of polygons of [east, north] points")] = ()
 
@@ -281,6 +286,7 @@ class Scenario:
     game: str
     time_limit: float
     netem: str
+    transport: str  # how best-effort messages travel in live runs: "tcp" or "udp"
     seed: int
     rules: CtfRules | ReachAvoidRules | PursuitRules
     guidance_rate: float
@@ -362,6 +368,7 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         game=head.game,
         time_limit=head.time_limit,
         netem=head.netem,
+        transport=head.transport,
         seed=head.seed,
         rules=rules,
         guidance_rate=file.guidance.rate,

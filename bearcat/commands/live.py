@@ -6,7 +6,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from bearcat import arguments
-from bearcat.scenarios.schema import load_scenario
+from bearcat.scenarios.schema import TRANSPORTS, load_scenario
 from bearcat.solve_ahead import solve_ahead
 from bearcat.writing import make_directory, writing
 
@@ -21,6 +21,11 @@ def register(subparsers) -> None:
     run.add_argument("--out", type=Path, metavar="DIR", help="run directory (default ./runs/SCENARIO-SEED)")
     run.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    run.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        help="how fixes and guidance travel: tcp (retransmitted, late) or udp (lost); default: the scenario's",
+    )
     run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
     run.set_defaults(run=run_live)
@@ -89,6 +94,11 @@ def register(subparsers) -> None:
     )
     peer.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    peer.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        help="how fixes and guidance travel: tcp, or udp to the same endpoints; default: the scenario's",
+    )
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
     peer.add_argument(
         "--vehicle",
@@ -118,7 +128,13 @@ def run_live(args) -> int:
     solve_ahead(scenario, netem)
     with writing(out, "run directory"):
         outcome = launch(
-            scenario, _reference(args.scenario), out, seed=seed, netem=netem, say=lambda text: print(text, flush=True)
+            scenario,
+            _reference(args.scenario),
+            out,
+            seed=seed,
+            netem=netem,
+            transport=args.transport,
+            say=lambda text: print(text, flush=True),
         )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
@@ -178,6 +194,7 @@ def run_peer(args) -> int:
             connect=args.connect,
             listen=args.listen,
             mode=args.mode,
+            transport=args.transport or scenario.transport,
             judge=args.judge,
             seed=scenario.seed if args.seed is None else args.seed,
             netem=args.netem or scenario.netem,
