@@ -50,6 +50,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
     that refuses a write arrives as ``WriteError``."""
     from bearcat.bus.errors import BusError
     from bearcat.maps.errors import MapError
+    from bearcat.netem.kernel.commands import KernelError
     from bearcat.netem.profiles import ProfileError
     from bearcat.scenarios.schema import ScenarioError
     from bearcat.solvers.errors import InputError
@@ -61,6 +62,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
         InputError,
         ScenarioError,
         ProfileError,
+        KernelError,
         BusError,
         FileNotFoundError,
         IsADirectoryError,

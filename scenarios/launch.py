@@ -40,8 +40,9 @@ from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
-from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
+from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.scenarios.dispatch import FAILED
+from bearcat.scenarios.peers import KernelPeers, LocalPeers
 from bearcat.scenarios.schema import Scenario
 
 log = logging.getLogger(__name__)
@@ -125,21 +126,26 @@ def launch(
     seed: int,
     netem: str,
     transport: str | None = None,
+    network: str = "shim",
     say=print,
     startup: float = STARTUP,
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
-    ``transport`` is how best-effort messages travel (default: the scenario's)."""
+    ``transport`` is how best-effort messages travel (default: the scenario's);
+    ``network`` "kernel" puts the peers behind a kernel network that impairs
+    their packets, "shim" leaves the impairment to each peer's shim."""
     transport = transport or scenario.transport
     out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
+    places = KernelPeers(port, netem, seed, report=out / "network.json") if network == "kernel" else LocalPeers(port)
+    endpoint = places.loopback
     # The launcher is the hub: a router every peer joins as a client. A mesh
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
     with (
-        ZenohSession("launcher", config(listen=[endpoint, best_effort_endpoint(endpoint)], mode="router")) as session,
+        places,
+        ZenohSession("launcher", config(listen=places.listen, mode="router")) as session,
         closing(EventLog(out / "events.jsonl")) as record,
     ):
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
@@ -179,21 +185,27 @@ def launch(
         reason = None
         try:
 
-            def spawn(name: str, command: list[str]) -> None:
-                # The child keeps its own copy of the log's descriptor; ours closes at once.
-                with open(out / "peers" / f"{name}.log", "w") as logfile:
-                    children[name] = subprocess.Popen(
-                        command, stdout=logfile, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL
-                    )
+            def command(role: str, name: str, *extra: str):
+                return lambda at: [
+                    *peer_command(role, scenario_ref, name, at, seed, netem, out, transport),
+                    *places.peer_flags,
+                    *extra,
+                ]
 
             roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
             for role, name in roles:
-                spawn(name, peer_command(role, scenario_ref, name, endpoint, seed, netem, out, transport))
+                log = out / "peers" / f"{name}.log"
+                children[name] = places.start(name, command(role, name), log, colocated=name == GROUND)
             for k, uav in enumerate(scenario.uavs):
                 port = free_port(socket.SOCK_DGRAM)
-                spawn(f"vehicle-{uav.id}", vehicle_command(scenario, k, port))
-                fly = ["--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"]
-                spawn(uav.id, peer_command("uav", scenario_ref, uav.id, endpoint, seed, netem, out, transport) + fly)
+                fly = ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated")
+                flyer = children[uav.id] = places.start(
+                    uav.id, command("uav", uav.id, *fly), out / "peers" / f"{uav.id}.log"
+                )
+                vehicle = f"vehicle-{uav.id}"
+                children[vehicle] = places.start_vehicle(
+                    flyer, vehicle_command(scenario, k, port), out / "peers" / f"{vehicle}.log"
+                )
             for name in keyboard:
                 say(
                     f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
@@ -215,6 +227,7 @@ def launch(
                 time.sleep(0.05)
             if reason is None:
                 start = Control(t=time.time(), command="start")
+                places.game_started(start.t)
                 session.put(keys.control(game), encode(start))
                 started_at = time.monotonic()
                 say(f"{game}: {len(expected)} peers up; game started")

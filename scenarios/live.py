@@ -136,6 +136,7 @@ def start_peer(
     out=None,
     mode="peer",
     transport: str = "tcp",
+    network: str = "shim",
     judge="truth",
     vehicle: str | None = None,
     sysid: int | None = None,
@@ -143,13 +144,16 @@ def start_peer(
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
     With ``transport`` "udp" its best-effort messages go to the same
-    endpoints over ``udp/`` (see ``bus.zenoh_session``).
+    endpoints over ``udp/`` (see ``bus.zenoh_session``). On a ``network``
+    "kernel" the links are impaired below it, so its shim keeps only the
+    dead zones; GPS and compass error stay in the phone either way.
     A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
     an ``emulated`` vehicle's telemetry is the truth."""
     import shapely
 
     from bearcat.bus.errors import BusError
     from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
+    from bearcat.netem.models import LinkModel
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import build_cast
     from bearcat.scenarios.schema import ScenarioError
@@ -220,7 +224,7 @@ def start_peer(
 
             session.subscribe(keys.every(scenario.name, "truth"), on_truth)
         shim = Shim(
-            profile.link,
+            profile.link if network == "shim" else LinkModel(),
             seed,
             dead_zones=zones,
             where=positions.get if zones is not None else None,

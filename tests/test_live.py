@@ -226,6 +226,21 @@ def test_ctrl_c_stops_every_peer(tmp_path, env):
     assert wait_for(lambda: peers_of(path) == [], 10)
 
 
+def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path, env):
+    """A launcher that cannot clean up (SIGKILL) still takes its peers with it:
+    each is started with the parent-death signal."""
+    launcher, out, path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+    try:
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        assert len(peers_of(path)) == 3
+        launcher.kill()
+        launcher.communicate(timeout=10)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    assert wait_for(lambda: peers_of(path) == [], 10)
+
+
 def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path, env):
     from bearcat.scenarios.live import fetch_scenario
 

@@ -6,6 +6,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from bearcat import arguments
+from bearcat.scenarios.peers import NETWORKS
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
 from bearcat.solve_ahead import solve_ahead
 from bearcat.writing import make_directory, writing
@@ -21,6 +22,13 @@ def register(subparsers) -> None:
     run.add_argument("--out", type=Path, metavar="DIR", help="run directory (default ./runs/SCENARIO-SEED)")
     run.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    run.add_argument(
+        "--network",
+        choices=NETWORKS,
+        default="shim",
+        help="shim (default): each peer impairs the messages it receives; kernel: every peer in a network "
+        "namespace of its own, its packets impaired by the kernel (needs root)",
+    )
     run.add_argument(
         "--transport",
         choices=TRANSPORTS,
@@ -95,6 +103,13 @@ def register(subparsers) -> None:
     peer.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     peer.add_argument(
+        "--network",
+        choices=NETWORKS,
+        default="shim",
+        help="shim (default): this peer impairs what it receives; kernel: the network it runs on does "
+        "(GPS and compass error stay in the phone)",
+    )
+    peer.add_argument(
         "--transport",
         choices=TRANSPORTS,
         help="how fixes and guidance travel: tcp, or udp to the same endpoints; default: the scenario's",
@@ -120,6 +135,12 @@ def register(subparsers) -> None:
 def run_live(args) -> int:
     from bearcat.scenarios.launch import launch
 
+    if args.network == "kernel":
+        from bearcat.netem.kernel.commands import KernelError
+        from bearcat.netem.kernel.network import missing
+
+        if (why := missing()) is not None:
+            raise KernelError(why)
     scenario = load_scenario(args.scenario)
     seed = scenario.seed if args.seed is None else args.seed
     netem = args.netem or scenario.netem
@@ -134,6 +155,7 @@ def run_live(args) -> int:
             seed=seed,
             netem=netem,
             transport=args.transport,
+            network=args.network,
             say=lambda text: print(text, flush=True),
         )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
@@ -195,6 +217,7 @@ def run_peer(args) -> int:
             listen=args.listen,
             mode=args.mode,
             transport=args.transport or scenario.transport,
+            network=args.network,
             judge=args.judge,
             seed=scenario.seed if args.seed is None else args.seed,
             netem=args.netem or scenario.netem,

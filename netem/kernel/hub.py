@@ -1,0 +1,187 @@
+"""The hub: the process that lives in the run's hub namespace and impairs
+every packet that crosses it.
+
+The launcher starts it with ``unshare --net`` and talks to it in JSON lines
+on its standard input; it answers each line on its standard output:
+
+- ``{"link": NAME, "iface": IF, "queues": [UP, DOWN]}``: the peer ``NAME``
+  is attached on ``IF``; its packets toward the router are queued on
+  ``UP``, those toward it on ``DOWN``, each direction impaired on its own;
+- ``{"start": T}``: the game started at Unix time ``T``; outage windows
+  count from it.
+
+The end of its standard input (the launcher closed it, or died) ends the
+hub, which writes what it did per link to the file given with ``--report``.
+
+Each packet arrives through iptables NFQUEUE; the hub draws its fate
+(``scheduler``), holds it until its time and accepts it, drops it, or for a
+duplicate accepts it and sends a copy through a raw socket. The queues are
+read without blocking from one loop that also keeps the timer of held
+packets, so a packet leaves within a millisecond or so of its time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import heapq
+import itertools
+import json
+import os
+import selectors
+import socket
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from bearcat.netem.kernel.commands import KernelError, run
+from bearcat.netem.kernel.scheduler import Direction
+from bearcat.netem.link import LinkState, link_rng
+from bearcat.netem.profiles import ProfileError, load_profile
+
+QUEUE_LENGTH = 65536
+"""Packets one queue may hold in the kernel before it drops: seconds of a busy link's traffic."""
+
+
+class Hub:
+    """The hub's state: the directions it impairs, the packets it holds, the game's start."""
+
+    def __init__(self, profile: str, seed: int, profiles: Path | None = None) -> None:
+        self.model = load_profile(profile, profiles).link
+        self.seed = seed
+        self.epoch: float | None = None
+        self.directions: dict[int, Direction] = {}
+        self.queues = []
+        self.held: list = []  # (release time, order, packet, is a copy)
+        self.order = itertools.count()
+        self.selector = selectors.DefaultSelector()
+        self.raw = socket.socket(socket.AF_INET, socket.SOCK_RAW, socket.IPPROTO_RAW)
+
+    def attach(self, name: str, iface: str, up: int, down: int) -> None:
+        """Queue ``name``'s packets on ``up`` (toward the router) and ``down`` (toward it)."""
+        from netfilterqueue import NetfilterQueue
+
+        for queue, match, sender, receiver in ((up, "-i", name, "hub"), (down, "-o", "hub", name)):
+            state = LinkState(self.model, link_rng(self.seed, sender, receiver))
+            self.directions[queue] = direction = Direction(f"{sender} -> {receiver}", state)
+            nfq = NetfilterQueue()
+            nfq.bind(queue, lambda packet, d=direction: self._arrived(d, packet), max_len=QUEUE_LENGTH)
+            self.queues.append(nfq)
+            self.selector.register(nfq.get_fd(), selectors.EVENT_READ, nfq)
+            run("iptables", "-t", "mangle", "-A", "FORWARD", match, iface, "-j", "NFQUEUE", "--queue-num", str(queue))
+
+    def _arrived(self, direction: Direction, packet) -> None:
+        now = time.time()
+        game_time = None if self.epoch is None else now - self.epoch
+        releases = direction.schedule(now, packet.get_payload_len(), game_time)
+        if not releases:
+            packet.drop()
+            return
+        packet.retain()
+        for k, at in enumerate(releases):
+            heapq.heappush(self.held, (at, next(self.order), packet, k > 0))
+
+    def release_due(self) -> float | None:
+        """Let go of the packets whose time has come; seconds until the next one (None: none held)."""
+        now = time.time()
+        while self.held and self.held[0][0] <= now:
+            _, _, packet, copy = heapq.heappop(self.held)
+            if copy:
+                payload = packet.get_payload()
+                destination = socket.inet_ntoa(payload[16:20])
+                try:
+                    self.raw.sendto(payload, (destination, 0))
+                except OSError:
+                    pass  # a duplicate that cannot be sent is a duplicate that did not happen
+            else:
+                packet.accept()
+        return None if not self.held else max(self.held[0][0] - now, 0.0)
+
+    def report(self) -> dict:
+        links = {}
+        for direction in self.directions.values():
+            delays = np.array(direction.delays) if direction.delays else np.zeros(0)
+            links[direction.name] = {
+                "counts": direction.counts,
+                "delay_s": {
+                    q: round(float(np.percentile(delays, p)), 6) if delays.size else None
+                    for q, p in (("p50", 50), ("p90", 90), ("p99", 99))
+                },
+            }
+        return links
+
+
+def serve(hub: Hub, commands, answer) -> None:
+    """Read ``commands`` and packets until the commands end."""
+    hub.selector.register(commands.fileno(), selectors.EVENT_READ, None)
+    buffered = b""
+    while True:
+        timeout = hub.release_due()
+        for key, _ in hub.selector.select(timeout):
+            if key.data is not None:
+                key.data.run(block=False)
+                continue
+            chunk = os.read(commands.fileno(), 65536)
+            if not chunk:
+                return
+            buffered += chunk
+            while b"\n" in buffered:
+                line, buffered = buffered.split(b"\n", 1)
+                answer(obey(hub, json.loads(line)))
+
+
+def obey(hub: Hub, command: dict) -> dict:
+    try:
+        if "link" in command:
+            up, down = command["queues"]
+            hub.attach(command["link"], command["iface"], int(up), int(down))
+            return {"ok": f"link {command['link']}"}
+        if "start" in command:
+            hub.epoch = float(command["start"])
+            return {"ok": "start"}
+        return {"error": f"unknown command {command!r}"}
+    except (KernelError, OSError, ValueError, KeyError) as exc:
+        return {"error": str(exc)}
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m bearcat.netem.kernel.hub")
+    parser.add_argument("--profile", required=True)
+    parser.add_argument("--profiles", type=Path, help="the profile file (default: the built-in one)")
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--report", type=Path)
+    args = parser.parse_args(argv)
+
+    def answer(reply: dict) -> None:
+        sys.stdout.write(json.dumps(reply) + "\n")
+        sys.stdout.flush()
+
+    try:
+        hub = Hub(args.profile, args.seed, args.profiles)
+        Path("/proc/sys/net/ipv4/ip_forward").write_text("1\n")
+        run("ip", "link", "set", "lo", "up")
+    except (KernelError, OSError, ImportError, ProfileError) as exc:
+        answer({"error": f"the hub could not start: {exc}"})
+        return 1
+    answer({"ok": "ready", "netem": _has_netem()})
+    try:
+        serve(hub, sys.stdin.buffer, answer)
+    finally:
+        if args.report is not None:
+            args.report.write_text(json.dumps(hub.report(), indent=2) + "\n")
+    return 0
+
+
+def _has_netem() -> bool:
+    """Whether this kernel has the netem qdisc (tried on the hub's own loopback)."""
+    try:
+        run("tc", "qdisc", "add", "dev", "lo", "root", "netem", "delay", "1ms")
+    except KernelError:
+        return False
+    run("tc", "qdisc", "del", "dev", "lo", "root")
+    return True
+
+
+if __name__ == "__main__":
+    sys.exit(main())

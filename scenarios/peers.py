@@ -1,0 +1,103 @@
+"""Where the peer processes of a live run start and how they reach the router.
+
+``LocalPeers``: every peer a child process on this host's network, joining
+the launcher's router over the loopback; the peers' own netem shims impair
+the messages. ``KernelPeers``: each peer but the ground station in a network
+namespace of its own behind the run's kernel network, which impairs the
+real packets (``netem.kernel``); the ground station, on the launcher's
+laptop in the field, stays on the loopback.
+
+Either way every child dies with the launcher (the parent-death signal), so
+a launcher killed with SIGKILL leaves no peer running.
+"""
+
+from __future__ import annotations
+
+import subprocess
+from collections.abc import Callable
+from pathlib import Path
+
+from bearcat.bus.zenoh_session import best_effort_endpoint
+from bearcat.netem.kernel.commands import die_with_parent
+
+NETWORKS = ("shim", "kernel")
+
+
+class LocalPeers:
+    """Peers on this host's network; the router listens on the loopback at ``port``."""
+
+    peer_flags: tuple[str, ...] = ()  # what a peer is told of the network it runs on
+
+    def __init__(self, port: int) -> None:
+        self.loopback = f"tcp/127.0.0.1:{port}"
+
+    def __enter__(self) -> LocalPeers:
+        return self
+
+    def __exit__(self, *_exc) -> None:
+        pass
+
+    @property
+    def listen(self) -> list[str]:
+        """The router's endpoints: tcp/ for everything, udp/ for best-effort traffic that asks for it."""
+        return [self.loopback, best_effort_endpoint(self.loopback)]
+
+    def start(
+        self, name: str, command: Callable[[str], list[str]], log: Path, *, colocated: bool = False
+    ) -> subprocess.Popen:
+        """Start peer ``name`` running ``command(endpoint)``, its output in ``log``;
+        a ``colocated`` peer shares the router's machine (the ground station)."""
+        return _child(command(self.loopback), log)
+
+    def start_vehicle(self, flyer: subprocess.Popen, command: list[str], log: Path) -> subprocess.Popen:
+        """Start the vehicle emulator ``flyer``'s UAV peer flies, where that peer reaches it on its loopback."""
+        return _child(command, log)
+
+    def game_started(self, t: float) -> None:
+        """The game started at Unix time ``t``."""
+
+
+class KernelPeers(LocalPeers):
+    """Peers in namespaces behind a kernel network impairing packets with profile ``netem``."""
+
+    peer_flags = ("--network", "kernel")
+
+    def __init__(self, port: int, netem: str, seed: int, report: Path) -> None:
+        from bearcat.netem.kernel.network import KernelNetwork
+
+        super().__init__(port)
+        self.port = port
+        self.network = KernelNetwork(netem, seed, report=report)
+
+    def __enter__(self) -> KernelPeers:
+        self.network.__enter__()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.network.__exit__(*exc)
+
+    @property
+    def listen(self) -> list[str]:
+        outside = f"tcp/{self.network.router}:{self.port}"
+        return [*super().listen, outside, best_effort_endpoint(outside)]
+
+    def start(self, name, command, log, *, colocated=False) -> subprocess.Popen:
+        if colocated:
+            return super().start(name, command, log)
+        with open(log, "w") as output:
+            return self.network.spawn(name, command(f"tcp/{self.network.router}:{self.port}"), log_file=output)
+
+    def start_vehicle(self, flyer, command, log) -> subprocess.Popen:
+        with open(log, "w") as output:
+            return self.network.enter(flyer, command, log_file=output)
+
+    def game_started(self, t: float) -> None:
+        self.network.start(t)
+
+
+def _child(command: list[str], log: Path) -> subprocess.Popen:
+    # The child keeps its own copy of the log's descriptor; ours closes at once.
+    with open(log, "w") as output:
+        return subprocess.Popen(
+            command, stdout=output, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent
+        )

@@ -1,0 +1,164 @@
+"""Kernel mode: real packets through network namespaces, impaired by the hub.
+
+The link carries the profile's delay and loss (measured on a stream of UDP
+probes, independently of the hub's own report), a live game in kernel mode
+ends with a verdict, and a launcher killed with SIGKILL leaves no process,
+interface or route behind. These tests need root and netfilterqueue; they
+skip with the reason otherwise (CI runs them as root).
+"""
+
+import json
+import os
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from bearcat.netem.kernel.network import KernelNetwork, missing
+
+needs_kernel = pytest.mark.skipif(missing() is not None, reason=str(missing()))
+
+PROBES = 2000
+PROFILES = """
+[probe]
+description = "a fixed delay and a known loss, to measure"
+[probe.link]
+delay = 0.1
+loss = 0.05
+"""
+SENDER = """
+import socket, struct, sys, time
+host, port, count = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
+s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
+for k in range(count):
+    s.sendto(struct.pack("!Id", k, time.time()), (host, port))
+    time.sleep(0.005)
+"""
+
+
+def leftovers() -> dict:
+    """What a kernel network leaves in this host's namespace: interfaces and routes."""
+    links = [
+        link["ifname"]
+        for link in json.loads(subprocess.run(["ip", "-j", "link"], capture_output=True, text=True).stdout)
+    ]
+    routes = json.loads(subprocess.run(["ip", "-j", "-4", "route"], capture_output=True, text=True).stdout)
+    return {
+        "interfaces": [name for name in links if name.startswith("bcat")],
+        "routes": [r["dst"] for r in routes if r.get("dst", "").startswith(("198.18.", "198.19."))],
+    }
+
+
+@needs_kernel
+def test_a_link_delays_and_loses_packets_as_its_profile_says(tmp_path):
+    profiles = tmp_path / "profiles.toml"
+    profiles.write_text(PROFILES)
+    with (
+        KernelNetwork("probe", seed=1, profiles=profiles, report=tmp_path / "network.json") as network,
+        socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver,
+    ):
+        receiver.bind((network.router, 0))
+        receiver.settimeout(2.0)
+        port = receiver.getsockname()[1]
+        with open(tmp_path / "sender.log", "w") as log:
+            sender = network.spawn(
+                "prober", [sys.executable, "-c", SENDER, network.router, str(port), str(PROBES)], log_file=log
+            )
+        delays = []
+        try:
+            while True:
+                payload = receiver.recv(64)
+                delays.append(time.time() - np.frombuffer(payload[4:12], dtype=">f8")[0])
+        except TimeoutError:
+            pass
+        assert sender.wait(timeout=30) == 0
+    delivered = len(delays) / PROBES
+    sigma = np.sqrt(0.05 * 0.95 / PROBES)
+    assert abs(delivered - 0.95) < 3 * sigma, delivered
+    p50, p99 = np.percentile(delays, [50, 99])
+    assert 0.099 < p50 < 0.106, p50  # the set 100 ms, plus the hub's scheduling
+    assert p99 < 0.125, p99
+    report = json.loads((tmp_path / "network.json").read_text())
+    assert report["prober -> hub"]["counts"]["delivered"] == len(delays)
+    assert leftovers() == {"interfaces": [], "routes": []}
+
+
+def run_kernel_game(tmp_path, *extra):
+    return subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "bearcat",
+            "run",
+            "fake-out",
+            "--network",
+            "kernel",
+            "--out",
+            str(tmp_path / "run"),
+            *extra,
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+        start_new_session=True,
+    )
+
+
+@needs_kernel
+def test_a_live_game_under_3g_in_kernel_mode_ends_with_a_verdict(tmp_path):
+    launcher = run_kernel_game(tmp_path, "--netem", "3g")
+    output, _ = launcher.communicate(timeout=600)
+    assert launcher.returncode == 0, output
+    outcome = json.loads((tmp_path / "run" / "outcome.json").read_text())
+    assert outcome["ended"] and outcome["winner"] in ("attacker", "defender"), outcome
+    report = json.loads((tmp_path / "run" / "network.json").read_text())
+    assert set(report) == {"attacker -> hub", "hub -> attacker", "defender -> hub", "hub -> defender"}
+    for direction, seen in report.items():
+        assert seen["counts"]["delivered"] > 50, direction
+        assert 0.115 <= seen["delay_s"]["p50"] < 0.2, direction  # 3g: 115 ms and a heavy tail
+    assert leftovers() == {"interfaces": [], "routes": []}
+
+
+@needs_kernel
+def test_a_launcher_killed_with_sigkill_leaves_nothing_behind(tmp_path):
+    launcher = run_kernel_game(tmp_path, "--netem", "wifi")
+    seen = ""
+    end = time.monotonic() + 300
+    while "game started" not in seen and time.monotonic() < end:
+        seen += launcher.stdout.readline()
+    assert "game started" in seen, seen
+    assert leftovers()["interfaces"], "the run's link to its hub is up while it plays"
+    os.kill(launcher.pid, signal.SIGKILL)
+    launcher.wait(timeout=10)
+    end = time.monotonic() + 10
+    while time.monotonic() < end and (leftovers() != {"interfaces": [], "routes": []} or peers_of(tmp_path)):
+        time.sleep(0.1)
+    assert peers_of(tmp_path) == []
+    assert leftovers() == {"interfaces": [], "routes": []}
+
+
+def peers_of(tmp_path: Path) -> list[int]:
+    """The processes still running a peer of this test's run."""
+    found = subprocess.run(["pgrep", "-f", str(tmp_path / "run")], capture_output=True, text=True).stdout
+    return [int(pid) for pid in found.split()]
+
+
+@pytest.mark.skipif(shutil.which("setpriv") is None, reason="setpriv (util-linux) drops the capabilities")
+def test_without_the_capabilities_kernel_mode_is_one_sentence_before_anything_starts(tmp_path):
+    run = subprocess.run(
+        ["setpriv", "--bounding-set=-sys_admin,-net_admin", "--inh-caps=-sys_admin,-net_admin"]
+        + [sys.executable, "-m", "bearcat", "run", "fake-out", "--network", "kernel", "--out", str(tmp_path / "run")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+    )
+    assert run.returncode == 2
+    assert run.stderr.startswith("bearcat: error: --network kernel needs root, or the capabilities CAP_SYS_ADMIN")
+    assert len(run.stderr.strip().splitlines()) == 1
+    assert not (tmp_path / "run").exists()
