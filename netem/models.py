@@ -44,6 +44,12 @@ class Delay:
     jitter: float = 0.0
     distribution: str = "normal"
 
+    @property
+    def mean(self) -> float:
+        """The mean delay (the clipping of normal jitter at zero aside)."""
+        extra = {"pareto": 1.0 / math.sqrt(3.0), "lognormal": 1.0 / math.sqrt(math.e - 1.0)}
+        return self.base + self.jitter * extra.get(self.distribution, 0.0)
+
     def sample(self, rng: np.random.Generator) -> float:
         j = self.jitter
         if j == 0.0 or self.distribution == "constant":
@@ -102,7 +108,10 @@ class LinkModel:
     bytes per second serialises messages (0: unlimited); ``idle_after``
     seconds without traffic demote the radio, and the next message waits a
     promotion delay drawn uniformly from ``promotion``; ``outages`` are time
-    windows without signal. ``retransmit`` is how long a reliable message
+    windows without signal. ``lease`` is how long a Zenoh session on this
+    network waits for a silent peer before it declares it gone: a second on a
+    LAN, more where a cellular link stalls for longer (a shorter lease makes
+    sessions drop and reconnect, losing what they carried). ``retransmit`` is how long a reliable message
     waits before each new try after a loss (reliable messages are never
     dropped, only late, as over Zenoh's TCP links)."""
 
@@ -116,10 +125,11 @@ class LinkModel:
     promotion: tuple[float, float] = (0.0, 0.0)
     outages: tuple[Outage, ...] = ()
     retransmit: float = 0.2
+    lease: float = 1.0
 
     @property
     def ideal(self) -> bool:
-        return self == LinkModel(retransmit=self.retransmit)
+        return self == LinkModel(retransmit=self.retransmit, lease=self.lease)
 
 
 class GpsError(_Table):

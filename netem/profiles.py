@@ -61,6 +61,7 @@ class LinkTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only
     promotion: Annotated[tuple[Lag, Lag], Meta(description="[shortest, longest] in seconds")] = LinkModel.promotion
     outages: tuple[Annotated[tuple[GameTime, GameTime], Meta(description="[start, end] in seconds")], ...] = ()
     retransmit: Annotated[float, Meta(gt=0.0, le=60.0, extra={"unit": "s"})] = LinkModel.retransmit
+    lease: Annotated[float, Meta(ge=0.5, le=60.0, extra={"unit": "s"})] = LinkModel.lease
 
 
 class ProfileTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
@@ -129,4 +130,5 @@ def _link_model(link: LinkTable, at: str) -> LinkModel:
         promotion=link.promotion,
         outages=tuple(Outage(start, end) for start, end in link.outages),
         retransmit=link.retransmit,
+        lease=link.lease,
     )

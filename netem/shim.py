@@ -82,6 +82,7 @@ class Shim:
         record: Callable[[Impairment], None] | None = None,
         colocated: tuple[str, ...] = (),
         epoch: float | None = 0.0,
+        transport: str = "udp",
     ) -> None:
         if dead_zones is not None and where is None:
             raise BusError("dead zones need a 'where' that gives each peer's position")
@@ -94,6 +95,7 @@ class Shim:
         self.record = record or (lambda impairment: None)
         self.colocated = tuple(colocated)
         self.epoch = epoch
+        self.transport = transport
         self._links: dict[tuple[str, str], LinkState] = {}
         self._held: list[tuple] = []
 
@@ -108,6 +110,7 @@ class Shim:
         ``receiver``: none if it is lost or held, two if duplicated. A held
         message comes back from ``poll`` with ``token``."""
         reliable, exempt = _kind(key)
+        reliable = reliable or self.transport == "tcp"  # over tcp/ every message rides the TCP stream
         local = sender == receiver or (sender in self.colocated and receiver in self.colocated)
         if exempt or local or (self.model.ideal and self.dead_zones is None):
             return [Delivery(now, payload)]
@@ -138,7 +141,8 @@ class Shim:
 
     def _send(self, sender, receiver, key, payload, sent, now, reliable) -> list[Delivery]:
         game_time = None if self.epoch is None else now - self.epoch
-        fate = self.link(sender, receiver).carry(now, len(payload), reliable=reliable, game_time=game_time)
+        way = "stream" if reliable else "datagram"
+        fate = self.link(sender, receiver).carry(now, len(payload), way=way, game_time=game_time)
         if fate.lost is not None:
             self._log(sent, sender, receiver, key, payload, "dropped", None, (fate.lost,))
             return []

@@ -41,6 +41,7 @@ from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.netem.profiles import load_profile
 from bearcat.scenarios.dispatch import FAILED
 from bearcat.scenarios.peers import KernelPeers, LocalPeers
 from bearcat.scenarios.schema import Scenario
@@ -135,6 +136,7 @@ def launch(
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim."""
     transport = transport or scenario.transport
+    lease_ms = round(1000 * load_profile(netem).link.lease)
     out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     port = free_port()
@@ -145,7 +147,7 @@ def launch(
     # host it delays and drops fixes (benchmarks/field.py, --mode).
     with (
         places,
-        ZenohSession("launcher", config(listen=places.listen, mode="router")) as session,
+        ZenohSession("launcher", config(listen=places.listen, mode="router", lease_ms=lease_ms)) as session,
         closing(EventLog(out / "events.jsonl")) as record,
     ):
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).

@@ -159,6 +159,7 @@ def start_peer(
     from bearcat.scenarios.schema import ScenarioError
 
     profile = load_profile(netem)
+    lease_ms = round(1000 * profile.link.lease)
     autopilot = None
     if role == "ground-station":
         players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge)
@@ -202,10 +203,12 @@ def start_peer(
         closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl")) as record,
         ZenohSession(
             name,
-            config(listen=listen, connect=connect, mode=mode),
+            config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms),
             best_effort=None
             if transport == "tcp"
-            else config(listen=[], connect=[best_effort_endpoint(e) for e in connect], mode="client"),
+            else config(
+                listen=[], connect=[best_effort_endpoint(e) for e in connect], mode="client", lease_ms=lease_ms
+            ),
         ) as session,
     ):
         if role == "ground-station":
