@@ -4,6 +4,7 @@ the wall clock, and the fix-to-guidance latency over Zenoh on loopback.
     python benchmarks/field.py                 # both, 10 and 50 phones
     python benchmarks/field.py --phones 10     # latency with 10 phones only
     python benchmarks/field.py --simulate-only
+    sudo python benchmarks/field.py --latency-only --kernel   # also every phone in its own namespace
 
 Latency: N phone processes each publish a GPS fix ten times a second and
 wait for the guidance that answers it; the ground station (the real
@@ -14,6 +15,10 @@ the time from publishing the fix to that arrival, on one clock. Lost fixes
 are counted where they should arrive, at the ground station. The peer it is compared
 with is a bare Zenoh echo over the same links (no codec, no agents): the
 ratio is what our layers cost on top of the transport.
+With ``--kernel`` the same measurement runs again with every phone in a
+network namespace of its own behind a kernel network under ``ideal`` (as
+``bearcat run --network kernel`` places them, clients of the ground station
+as a router): what the namespaces, the hub and its packet queue cost.
 Targets: p99 under 20 ms with 10 phones and no fix unanswered; ``simulate``
 at least 50x faster than real time for a 1 vs 1 game with 10 Hz guidance.
 """
@@ -22,6 +27,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import contextlib
 import json
 import subprocess
 import sys
@@ -88,7 +94,7 @@ def phone(args) -> None:
     )
 
 
-def latency(n: int, duration: float, mode: str = "peer") -> dict:
+def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -> dict:
     from bearcat.agents.ground_station.guidance import GuidanceService
     from bearcat.bus import keys
     from bearcat.bus.codec import Inbox
@@ -101,9 +107,17 @@ def latency(n: int, duration: float, mode: str = "peer") -> dict:
     endpoint = f"tcp/127.0.0.1:{port}"
     ids = [f"p{k}" for k in range(n)]
     hub = "router" if mode == "client" else "peer"
+    network = contextlib.nullcontext()
+    if kernel:
+        from bearcat.netem.kernel.network import KernelNetwork
+
+        network = KernelNetwork("ideal", seed=0)
     # The bare-Zenoh peer, "echo", sends every ping straight back.
     with (
-        ZenohSession("gs", config(listen=[endpoint], mode=hub)) as session,
+        network,
+        ZenohSession(
+            "gs", config(listen=[endpoint] + ([f"tcp/{network.router}:{port}"] if kernel else []), mode=hub)
+        ) as session,
         ZenohSession("echo", config(connect=[endpoint], listen=[] if mode == "client" else None, mode=mode)) as echo,
     ):
         echo.subscribe("bench/echo/*/out", lambda k, p, s: echo.put(k.rsplit("/", 1)[0] + "/back", p, reliable=False))
@@ -119,27 +133,24 @@ def latency(n: int, duration: float, mode: str = "peer") -> dict:
         seen = set()
         session.subscribe_liveliness(keys.every(GAME, "alive"), lambda k, up: seen.add(k) if up else None)
         with tempfile.TemporaryDirectory() as tmp:
-            procs = [
-                subprocess.Popen(
-                    [
-                        sys.executable,
-                        __file__,
-                        "--phone",
-                        pid,
-                        "--connect",
-                        endpoint,
-                        "--duration",
-                        str(duration),
-                        "--warmup",
-                        "3",
-                        "--out",
-                        f"{tmp}/{pid}.json",
-                        "--mode",
-                        mode,
-                    ]
-                )
-                for pid in ids
-            ]
+
+            def command(pid: str, at: str) -> list[str]:
+                return [sys.executable, __file__, "--phone", pid, "--connect", at, "--duration", str(duration)] + [
+                    "--warmup",
+                    "3",
+                    "--out",
+                    f"{tmp}/{pid}.json",
+                    "--mode",
+                    mode,
+                ]
+
+            if kernel:
+                procs = [
+                    network.spawn(pid, command(pid, f"tcp/{network.router}:{port}"), log_file=subprocess.DEVNULL)
+                    for pid in ids
+                ]
+            else:
+                procs = [subprocess.Popen(command(pid, endpoint)) for pid in ids]
 
             async def serve():
                 task = asyncio.create_task(run_peer([service], session, GAME))
@@ -198,6 +209,9 @@ def main() -> None:
         default="peer",
         help="phones as Zenoh peers (a full mesh) or as clients of the ground station as a router",
     )
+    parser.add_argument(
+        "--kernel", action="store_true", help="measure again with every phone in a namespace (root; clients)"
+    )
     parser.add_argument("--phone", help=argparse.SUPPRESS)
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--warmup", type=float, default=3.0, help=argparse.SUPPRESS)
@@ -216,10 +230,14 @@ def main() -> None:
         print(
             "fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)"
         )
-        for n in args.phones:
-            r = latency(n, args.duration, args.mode)
+        runs = [(n, args.mode, False) for n in args.phones]
+        runs += [(n, "client", True) for n in args.phones] if args.kernel else []
+        for n, mode, kernel in runs:
+            r = latency(n, args.duration, mode, kernel)
+            where = "namespaces, kernel network" if kernel else "loopback"
             print(
-                f"  {n:3d} phones ({args.mode}s): {r['fixes']} fixes, {r['lost']} lost, {r['unanswered']} unanswered; "
+                f"  {n:3d} phones ({mode}s, {where}): {r['fixes']} fixes, {r['lost']} lost, "
+                f"{r['unanswered']} unanswered; "
                 f"latency p50 {r['p50_ms']:.2f} ms, p99 {r['p99_ms']:.2f} ms; "
                 f"bare Zenoh echo p50 {r['echo_p50_ms']:.2f} ms, p99 {r['echo_p99_ms']:.2f} ms "
                 f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)"

@@ -105,6 +105,8 @@ class LinkState:
         "last_stream",
         "model",
         "rng",
+        "score",
+        "scored_at",
         "sent_since",
         "slow_start",
         "tcp",
@@ -122,6 +124,8 @@ class LinkState:
         self.last_entry = -np.inf  # when the TCP stream last took a message
         self.gap = 0.25  # s between messages on the TCP stream (smoothed); Zenoh keeps a link alive at least so
         self.slow_start = -np.inf  # when the congestion window last restarted after a timeout
+        self.score = 0.0  # the jitter's normal score, moving with time
+        self.scored_at = -np.inf
         self.sent_since = 0  # packets the stream took since
 
     def carry(self, now: float, size: int, *, way: str, game_time: float | None = None) -> Fate:
@@ -166,9 +170,9 @@ class LinkState:
                     if copy == 0:
                         return Fate((), "reordered")
                     break
-                copies.append(Copy(start + m.delay.sample(rng) - m.delay.base, (*reasons, "reordered")))
+                copies.append(Copy(start + self._delay(start) - m.delay.base, (*reasons, "reordered")))
                 continue
-            at = max(start + m.delay.sample(rng), self.last_datagram)
+            at = max(start + self._delay(start), self.last_datagram)
             self.last_datagram = at
             copies.append(Copy(at, tuple(reasons)))
         return Fate(tuple(copies))
@@ -195,7 +199,7 @@ class LinkState:
         if retransmitted:
             reasons.append(f"retransmitted x{retransmitted}")
         start = self._window(start, packets)
-        at = max(start + self.model.delay.sample(self.rng), self.last_stream)
+        at = max(start + self._delay(start), self.last_stream)
         self.last_stream = at
         return Fate((Copy(at, tuple(reasons)),))
 
@@ -210,6 +214,21 @@ class LinkState:
         if 2.0**rounds * self.gap >= self.tcp.srtt:  # the window carries the stream again
             self.slow_start = -np.inf
         return max(start, self.slow_start + rounds * self.tcp.srtt)
+
+    def _delay(self, t: float) -> float:
+        """The delay of a packet sent at ``t``. With a ``jitter_time`` the
+        jitter's normal score is an Ornstein-Uhlenbeck process in time, so the
+        delay drifts rather than jumps and a busy link keeps its packets in
+        order without its delays piling up behind one unlucky packet; each
+        packet's delay still has the model's distribution."""
+        m = self.model
+        if m.jitter_time <= 0:
+            return m.delay.sample(self.rng)
+        if t > self.scored_at:
+            a = math.exp(-(t - self.scored_at) / m.jitter_time) if np.isfinite(self.scored_at) else 0.0
+            self.score = a * self.score + math.sqrt(1.0 - a * a) * float(self.rng.standard_normal())
+            self.scored_at = t
+        return m.delay.at(self.score)
 
     def _burst_left(self) -> float:
         """Packets the link is expected to lose after this one before it delivers again."""

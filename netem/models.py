@@ -51,20 +51,27 @@ class Delay:
         return self.base + self.jitter * extra.get(self.distribution, 0.0)
 
     def sample(self, rng: np.random.Generator) -> float:
+        """One delay drawn on its own."""
+        return self.at(float(rng.standard_normal()))
+
+    def at(self, score: float) -> float:
+        """The delay whose quantile is that of the standard normal ``score``:
+        a link whose scores move slowly (``LinkState``) gives close packets
+        close delays, with this distribution for each of them."""
         j = self.jitter
         if j == 0.0 or self.distribution == "constant":
             return self.base
-        if self.distribution == "uniform":
-            extra = rng.uniform(-j, j)
-        elif self.distribution == "normal":
-            extra = rng.normal(0.0, j)
+        if self.distribution == "normal":
+            extra = j * score
+        elif self.distribution == "uniform":
+            extra = j * (1.0 - math.erfc(score / math.sqrt(2.0)))  # 2 Phi(score) - 1 of the half-width
         elif self.distribution == "pareto":
-            # Lomax with shape 3 scaled to standard deviation j (mean j / sqrt 3).
-            extra = rng.pareto(3.0) * (2.0 * j / math.sqrt(3.0))
+            # Lomax with shape 3 scaled to standard deviation j (mean j / sqrt 3), from its survival.
+            survival = 0.5 * math.erfc(score / math.sqrt(2.0))
+            extra = (2.0 * j / math.sqrt(3.0)) * (max(survival, 1e-300) ** (-1.0 / 3.0) - 1.0)
         else:  # lognormal with sigma 1 scaled to standard deviation j (mean j / sqrt(e - 1) ~ 0.76 j)
-            scale = j / math.sqrt((math.e - 1.0) * math.e)
-            extra = rng.lognormal(math.log(scale), 1.0)
-        return max(0.0, self.base + float(extra))
+            extra = j / math.sqrt((math.e - 1.0) * math.e) * math.exp(score)
+        return max(0.0, self.base + extra)
 
 
 class GilbertElliott(_Table):
@@ -103,19 +110,23 @@ class LinkModel:
 
     ``loss`` is Bernoulli, ``burst`` Gilbert-Elliott (both may apply);
     ``duplicate`` the chance of a second copy (its own delay draw);
-    ``reorder`` the chance a best-effort message skips the delay's base
-    (netem's reordering: it overtakes those still in flight); ``rate`` in
+    ``jitter_time`` how long the delay's jitter takes to change (its
+    correlation time: packets sent close together get close delays, as on
+    a cellular link whose delay is mostly queueing; 0 draws each packet's
+    alone);
+    ``reorder`` the chance a packet skips the delay's base (netem's
+    reordering: it overtakes those still in flight); ``rate`` in
     bytes per second serialises messages (0: unlimited); ``idle_after``
     seconds without traffic demote the radio, and the next message waits a
     promotion delay drawn uniformly from ``promotion``; ``outages`` are time
     windows without signal. ``lease`` is how long a Zenoh session on this
     network waits for a silent peer before it declares it gone: a second on a
     LAN, more where a cellular link stalls for longer (a shorter lease makes
-    sessions drop and reconnect, losing what they carried). ``retransmit`` is how long a reliable message
-    waits before each new try after a loss (reliable messages are never
-    dropped, only late, as over Zenoh's TCP links)."""
+    sessions drop and reconnect, losing what they carried). How a TCP stream
+    recovers what the link loses follows from the delays (``netem.link.Tcp``)."""
 
     delay: Delay = field(default_factory=Delay)
+    jitter_time: float = 0.0
     loss: float = 0.0
     burst: GilbertElliott | None = None
     duplicate: float = 0.0
@@ -124,12 +135,11 @@ class LinkModel:
     idle_after: float = 0.0
     promotion: tuple[float, float] = (0.0, 0.0)
     outages: tuple[Outage, ...] = ()
-    retransmit: float = 0.2
     lease: float = 1.0
 
     @property
     def ideal(self) -> bool:
-        return self == LinkModel(retransmit=self.retransmit, lease=self.lease)
+        return self == LinkModel(lease=self.lease)
 
 
 class GpsError(_Table):

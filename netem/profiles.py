@@ -52,6 +52,7 @@ class LinkTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only
     delay: Lag = Delay.base
     jitter: Lag = Delay.jitter
     distribution: Literal[DISTRIBUTIONS] = Delay.distribution
+    jitter_time: Lag = LinkModel.jitter_time
     loss: Probability = LinkModel.loss
     burst: GilbertElliott | None = LinkModel.burst
     duplicate: Probability = LinkModel.duplicate
@@ -60,7 +61,6 @@ class LinkTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only
     idle_after: Annotated[float, Meta(ge=0.0, le=3600.0, extra={"unit": "s"})] = LinkModel.idle_after
     promotion: Annotated[tuple[Lag, Lag], Meta(description="[shortest, longest] in seconds")] = LinkModel.promotion
     outages: tuple[Annotated[tuple[GameTime, GameTime], Meta(description="[start, end] in seconds")], ...] = ()
-    retransmit: Annotated[float, Meta(gt=0.0, le=60.0, extra={"unit": "s"})] = LinkModel.retransmit
     lease: Annotated[float, Meta(ge=0.5, le=60.0, extra={"unit": "s"})] = LinkModel.lease
 
 
@@ -121,6 +121,7 @@ def _link_model(link: LinkTable, at: str) -> LinkModel:
             raise Invalid(f"{at}.outages[{k}]", f"ends at {end:g} s, before it starts at {start:g} s")
     return LinkModel(
         delay=Delay(link.delay, link.jitter, link.distribution),
+        jitter_time=link.jitter_time,
         loss=link.loss,
         burst=link.burst,
         duplicate=link.duplicate,
@@ -129,6 +130,5 @@ def _link_model(link: LinkTable, at: str) -> LinkModel:
         idle_after=link.idle_after,
         promotion=link.promotion,
         outages=tuple(Outage(start, end) for start, end in link.outages),
-        retransmit=link.retransmit,
         lease=link.lease,
     )

@@ -8,12 +8,16 @@ has its own generator, spawned from the run's seed and the two peer names,
 so one link's draws do not depend on which other links exist or how busy
 they are.
 
-Best-effort messages (fixes, guidance) are lost outright. Reliable ones
-(game state, control, UAV tasks) are never lost, as over Zenoh's TCP links:
-a loss costs a retransmission timeout and another try, an outage holds them
-until it ends, and they keep their order on the link. Messages to or from a
-peer standing in a dead zone (no signal between buildings) are lost, or held
-and released by ``poll`` once both ends have signal again.
+How a message fares depends on how Zenoh carries it (``netem.link``).
+Reliable ones (game state, control, UAV tasks) always ride a TCP stream:
+never lost, a loss costs a retransmission and holds what follows, an outage
+holds them until it ends. Best-effort ones (fixes, guidance) ride the same
+stream when the run's ``transport`` is "tcp" (late, in bursts, never lost)
+and datagrams when it is "udp" (lost outright, in order otherwise); the
+shim was calibrated against the kernel's real TCP and Zenoh over UDP
+(benchmarks/network_calibration.py). Messages to or from a peer standing in
+a dead zone (no signal between buildings) are lost, or held and released by
+``poll`` once both ends have signal again.
 
 Every decision is reported to ``record`` as an ``Impairment``: delivered
 with what delay and why, duplicated, dropped and why, so an analysis can
@@ -70,7 +74,8 @@ class Shim:
     one laptop) are never impaired. ``epoch`` is when the game started on
     the clock ``now`` is read from (0 in simulation's game time); the
     model's outage windows count from it, and none applies while it is None
-    (a live peer learns it from the start command)."""
+    (a live peer learns it from the start command). ``transport`` is how
+    best-effort messages travel: "tcp" or "udp"."""
 
     def __init__(
         self,
@@ -82,7 +87,7 @@ class Shim:
         record: Callable[[Impairment], None] | None = None,
         colocated: tuple[str, ...] = (),
         epoch: float | None = 0.0,
-        transport: str = "udp",
+        transport: str = "tcp",
     ) -> None:
         if dead_zones is not None and where is None:
             raise BusError("dead zones need a 'where' that gives each peer's position")

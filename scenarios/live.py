@@ -234,6 +234,7 @@ def start_peer(
             record=record.impaired,
             colocated=GROUND_PEERS,
             epoch=None,
+            transport=transport,
         )
         keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
         if keyboard:

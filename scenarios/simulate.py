@@ -41,11 +41,13 @@ POLL = 0.1  # s between releases of messages held in dead zones
 @dataclass
 class Outcome:
     """How a run ended: ``winner`` (a team, None if nobody won), ``reason``,
-    ``elapsed`` seconds of game time, the final ``state`` and message counts."""
+    ``elapsed`` seconds of game time, the final ``state`` and message counts;
+    ``netem`` and ``transport`` the network it was played on."""
 
     scenario: str
     seed: int
     netem: str
+    transport: str
     winner: str | None
     reason: str
     elapsed: float
@@ -63,6 +65,7 @@ def simulate(
     *,
     seed: int | None = None,
     netem: str | None = None,
+    transport: str | None = None,
     events: str | Path | None = None,
     ctf_progress=None,
     inspect=None,
@@ -73,7 +76,8 @@ def simulate(
     ten times a second (tests check invariants against the truth with it).
     ``players`` plays instead of the cast ``build_cast`` makes for the seed
     and network profile (built for the same ones, with an agent swapped or
-    wrapped)."""
+    wrapped). ``netem`` and ``transport`` play it on another network than
+    the scenario's."""
     seed = scenario.seed if seed is None else int(seed)
     profile = load_profile(netem or scenario.netem)
     if players is None:
@@ -94,6 +98,7 @@ def simulate(
         where=where if zones is not None else None,
         record=record.impaired,
         colocated=ground,
+        transport=transport or scenario.transport,
     )
 
     def arrive(call, payload):
@@ -172,6 +177,7 @@ def simulate(
         scenario=scenario.name,
         seed=seed,
         netem=profile.name,
+        transport=transport or scenario.transport,
         winner=state.winner if state else None,
         reason=state.reason if state else f"no result within {scenario.time_limit + GRACE:g} s of game time",
         elapsed=state.elapsed if state else env.now,

@@ -25,15 +25,21 @@ STUDIES = {
 }
 
 
-def study_tasks(study: str, trials: int, seed: int, profiles=None) -> list[dict]:
+def study_tasks(study: str, trials: int, seed: int, profiles=None, transports=None) -> list[dict]:
+    """The games of ``study``: per scenario, profile, transport (None: the scenario's) and search, ``trials`` seeds."""
     spec = STUDIES[study]
     tasks = []
     for scenario in spec["scenarios"]:
         for profile in profiles or spec["profiles"]:
-            for search in spec.get("searches", (None,)):
-                for s in range(seed, seed + trials):
-                    key = "/".join(str(part) for part in (scenario, profile or "own", search, s) if part is not None)
-                    tasks.append({"key": key, "scenario": scenario, "netem": profile, "seed": s, "search": search})
+            for transport in transports or (None,):
+                for search in spec.get("searches", (None,)):
+                    for s in range(seed, seed + trials):
+                        parts = (scenario, profile or "own", transport, search, s)
+                        key = "/".join(str(part) for part in parts if part is not None)
+                        tasks.append(
+                            {"key": key, "scenario": scenario, "netem": profile, "transport": transport}
+                            | {"seed": s, "search": search}
+                        )
     return tasks
 
 
@@ -56,8 +62,11 @@ def play_task(task: dict) -> dict:
         )
     with tempfile.TemporaryDirectory() as tmp:
         events = f"{tmp}/events.jsonl"
-        outcome = simulate(scenario, seed=task["seed"], netem=task["netem"], events=events)
-        row = {k: v for k, v in asdict(outcome).items() if k in ("winner", "reason", "elapsed", "netem", "notes")}
+        outcome = simulate(
+            scenario, seed=task["seed"], netem=task["netem"], transport=task.get("transport"), events=events
+        )
+        keep = ("winner", "reason", "elapsed", "netem", "transport", "notes")
+        row = {k: v for k, v in asdict(outcome).items() if k in keep}
         went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
         true_value = None if went is None else _true_value(scenario, events, went)
     found = [v for k, v in outcome.notes.items() if k.endswith(".found_at")]
@@ -98,9 +107,9 @@ def summarise(results) -> list[dict]:
     against the defender's) and how many of those the attacker won."""
     groups = defaultdict(list)
     for r in results:
-        groups[(r["scenario"], r["netem"])].append(r)
+        groups[(r["scenario"], r["netem"], r.get("transport", "tcp"))].append(r)
     rows = []
-    for (scenario, netem), games in sorted(groups.items()):
+    for (scenario, netem, transport), games in sorted(groups.items()):
         wins = sum(g["winner"] == "attacker" for g in games)
         went = [g for g in games if g["went_at"] is not None]
         good = sum(g["winner"] == "attacker" for g in went)
@@ -109,9 +118,11 @@ def summarise(results) -> list[dict]:
             {
                 "scenario": scenario,
                 "netem": netem,
+                "transport": transport,
                 "games": len(games),
                 "attacker_wins": wins,
                 "attacker_win_rate": round(wins / len(games), 3),
+                "attacker_win_interval": [round(x, 3) for x in wilson(wins, len(games))],
                 "goes": len(went),
                 "goes_won": good,
                 "false_goes": len(went) - good,

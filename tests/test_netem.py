@@ -10,6 +10,7 @@ import pytest
 import shapely
 
 from bearcat.bus import keys
+from bearcat.netem.link import LinkState, Tcp
 from bearcat.netem.models import (
     CompassError,
     CompassTrack,
@@ -63,7 +64,7 @@ def test_a_delay_is_never_negative():
 
 
 def test_bernoulli_loss_rate_is_measured_within_three_sigma():
-    shim = Shim(LinkModel(loss=0.1), seed=3)
+    shim = Shim(LinkModel(loss=0.1), seed=3, transport="udp")
     arrivals = stream(shim, 20000)
     lost = np.mean([not a for _, a in arrivals])
     assert abs(lost - 0.1) < 3 * math.sqrt(0.1 * 0.9 / 20000)
@@ -71,7 +72,7 @@ def test_bernoulli_loss_rate_is_measured_within_three_sigma():
 
 def test_gilbert_elliott_loss_has_its_stationary_rate_and_burst_length():
     ge = GilbertElliott(p=0.02, r=0.2, loss_good=0.0, loss_bad=1.0)
-    shim = Shim(LinkModel(burst=ge), seed=4)
+    shim = Shim(LinkModel(burst=ge), seed=4, transport="udp")
     lost = np.array([not a for _, a in stream(shim, 100000)])
     assert lost.mean() == pytest.approx(ge.stationary_loss, rel=0.1)
     edges = np.flatnonzero(np.diff(np.r_[0, lost.astype(int), 0]))
@@ -80,7 +81,7 @@ def test_gilbert_elliott_loss_has_its_stationary_rate_and_burst_length():
 
 
 def test_reliable_messages_are_never_lost_only_late_and_in_order():
-    shim = Shim(LinkModel(delay=Delay(0.1, 0.05, "normal"), loss=0.3, retransmit=0.4), seed=5)
+    shim = Shim(LinkModel(delay=Delay(0.1, 0.05, "normal"), loss=0.3), seed=5)
     arrivals = stream(shim, 2000, key=STATE)
     assert all(len(a) == 1 for _, a in arrivals)
     times = [a[0] for _, a in arrivals]
@@ -89,20 +90,24 @@ def test_reliable_messages_are_never_lost_only_late_and_in_order():
     assert max(late) > 0.4  # some needed a retransmission
 
 
-def test_duplicates_and_reordering_happen_at_their_rates():
-    shim = Shim(LinkModel(delay=Delay(0.3, 0.01, "normal"), duplicate=0.05, reorder=0.1), seed=6)
+def test_over_udp_duplicates_happen_at_their_rate_and_a_reordered_message_is_lost():
+    """Zenoh drops a best-effort message older than one it delivered, so a
+    message that would overtake the ones in flight costs one; the rest
+    arrive in order, as a cellular bearer delivers them."""
+    shim = Shim(LinkModel(delay=Delay(0.3, 0.01, "normal"), duplicate=0.05, reorder=0.1), seed=6, transport="udp")
     arrivals = stream(shim, 20000, period=0.01)
-    assert np.mean([len(a) == 2 for _, a in arrivals]) == pytest.approx(0.05, abs=0.006)
-    first = np.array([a[0] for _, a in arrivals])
-    overtaking = np.mean(np.diff(first) < -0.1)  # skipped the 0.3 s base
-    assert overtaking == pytest.approx(0.1 * 0.9, abs=0.01)
+    assert np.mean([not a for _, a in arrivals]) == pytest.approx(0.1, abs=0.006)
+    delivered = [a for _, a in arrivals if a]
+    assert np.mean([len(a) == 2 for a in delivered]) == pytest.approx(0.05 * 0.9, abs=0.006)
+    first = np.array([a[0] for a in delivered])
+    assert (np.diff(first) >= 0).all()
 
 
 # ---------------------------------------------------------------------- outages, dead zones, promotion
 
 
 def test_an_outage_drops_fixes_and_holds_state_until_it_ends():
-    shim = Shim(LinkModel(delay=Delay(0.1), outages=(Outage(1.0, 3.0),)), seed=7)
+    shim = Shim(LinkModel(delay=Delay(0.1), outages=(Outage(1.0, 3.0),)), seed=7, transport="udp")
     assert shim.transmit("a1", "gs", FIX, PAYLOAD, 2.0) == []
     (held,) = shim.transmit("gs", "a1", STATE, PAYLOAD, 2.0)
     assert held.at == pytest.approx(3.1)
@@ -112,9 +117,9 @@ def test_an_outage_drops_fixes_and_holds_state_until_it_ends():
 def test_outage_windows_count_from_the_game_start_on_a_live_clock():
     """Live peers read Unix time; the windows are game time, from the start command."""
     model = LinkModel(delay=Delay(0.1), outages=(Outage(1.0, 3.0),))
-    before_start = Shim(model, seed=7, epoch=None)
+    before_start = Shim(model, seed=7, epoch=None, transport="udp")
     assert before_start.transmit("a1", "gs", FIX, PAYLOAD, 1_700_000_002.0)  # no game yet, no window
-    live = Shim(model, seed=7, epoch=1_700_000_000.0)
+    live = Shim(model, seed=7, epoch=1_700_000_000.0, transport="udp")
     assert live.transmit("a1", "gs", FIX, PAYLOAD, 1_700_000_002.0) == []
     (held,) = live.transmit("gs", "a1", STATE, PAYLOAD, 1_700_000_002.0)
     assert held.at == pytest.approx(1_700_000_003.1)
@@ -130,6 +135,7 @@ def test_a_dead_zone_cuts_a_phone_off_and_poll_releases_what_was_held():
         dead_zones=shapely.box(0, 0, 10, 10),
         where=position.get,
         record=records.append,
+        transport="udp",
     )
     assert shim.transmit("a1", "gs", FIX, PAYLOAD, 1.0) == []
     assert shim.transmit("gs", "a1", STATE, PAYLOAD, 1.0, token="state #1") == []
@@ -171,12 +177,12 @@ def test_truth_and_control_are_never_impaired():
 
 def test_every_impairment_is_recorded():
     records = []
-    shim = Shim(load_profile("3g-degraded").link, seed=2, record=records.append)
+    shim = Shim(load_profile("3g-degraded").link, seed=2, record=records.append, transport="udp")
     arrivals = stream(shim, 3000)
     delivered = sum(len(a) for _, a in arrivals)
     assert sum(r.action in ("delivered", "duplicated") for r in records) == delivered
     assert sum(r.action == "dropped" for r in records) == sum(not a for _, a in arrivals)
-    assert {r.reasons[0] for r in records if r.action == "dropped"} <= {"loss", "burst"}
+    assert {r.reasons[0] for r in records if r.action == "dropped"} <= {"loss", "burst", "reordered"}
 
 
 # ---------------------------------------------------------------------- profiles
@@ -186,7 +192,7 @@ def test_every_impairment_is_recorded():
 def test_each_profile_measures_as_declared(name):
     profile = load_profile(name)
     m = profile.link
-    shim = Shim(m, seed=21)
+    shim = Shim(m, seed=21, transport="udp")
     arrivals = stream(shim, 20000)
     delays = np.array([a[0] - s for s, a in arrivals if a])
     lost = np.mean([not a for _, a in arrivals])
@@ -230,7 +236,7 @@ def test_a_misspelt_profile_key_is_named_with_its_file(tmp_path):
         ("[mine.link]\nburst = { p = 0.1 }\n", "mine.link.burst.r: must be given, as a probability in [0, 1]"),
         ("[mine.link]\ndelay = nan\n", "mine.link.delay: must be a number in [0, 60] s, got nan"),
         ("[mine.link]\njitter = -0.1\n", "mine.link.jitter: must be a number in [0, 60] s, got -0.1"),
-        ("[mine.link]\nretransmit = 0.0\n", "mine.link.retransmit: must be a number in (0, 60] s, got 0.0"),
+        ("[mine.link]\nlease = 0.1\n", "mine.link.lease: must be a number in [0.5, 60] s, got 0.1"),
         ("[mine.link]\nrate = inf\n", "mine.link.rate: must be a number in [0, 1e12] bytes/s, got inf"),
         (
             "[mine.link]\npromotion = [2.6, 1.0]\n",
@@ -305,3 +311,50 @@ def test_the_compass_keeps_its_bias():
 def test_a_perfect_gps_has_no_error():
     track = GpsTrack(GpsError(), np.random.default_rng(0))
     assert np.all(track.error(0.0) == 0) and np.all(track.error(5.0) == 0)
+
+
+# ---------------------------------------------------------------------- the TCP stream
+
+
+def tcp_stream(model, n=6000, period=0.1, seed=31):
+    """``n`` fixes ``period`` apart through a link over tcp/: (sent, arrival, reasons) each."""
+    records = []
+    shim = Shim(model, seed=seed, record=records.append, transport="tcp")
+    for k in range(n):
+        shim.transmit("a1", "gs", FIX, PAYLOAD, k * period)
+    return [(r.sent, r.sent + r.delay, r.reasons) for r in records]
+
+
+def test_over_tcp_a_lost_packet_stalls_for_the_recovery_its_model_declares():
+    model = LinkModel(delay=Delay(0.1), loss=0.02)
+    messages = tcp_stream(model)
+    tcp = Tcp.of(model)
+    assert tcp.srtt == pytest.approx(0.2) and tcp.rto == pytest.approx(Tcp.MIN_RTO)
+    once = [at - sent - 0.1 for sent, at, why in messages[100:] if why == ("retransmitted x1",)]
+    twice = [at - sent - 0.1 for sent, at, why in messages[100:] if why == ("retransmitted x2",)]
+    assert len(once) > 50 and twice
+    # RACK: the next fix 0.1 s later is acknowledged a round trip on, plus a quarter of one.
+    assert np.median(once) == pytest.approx(0.1 + 1.25 * 0.2, abs=0.01)
+    # Lost again: the retransmission timer, on top.
+    assert np.median(twice) == pytest.approx(0.1 + 1.25 * 0.2 + Tcp.MIN_RTO, abs=0.01)
+
+
+def test_over_tcp_nothing_is_lost_and_what_follows_a_loss_arrives_with_it_in_a_burst():
+    messages = tcp_stream(LinkModel(delay=Delay(0.1), loss=0.02))
+    arrivals = np.array([at for _, at, _ in messages])
+    assert len(messages) == 6000 and (np.diff(arrivals) >= 0).all()  # every fix, in order
+    stalls = [k for k, (_, _, why) in enumerate(messages) if why == ("retransmitted x1",)]
+    for k in stalls[:20]:
+        held = [j for j in range(k + 1, len(messages)) if messages[j][0] + 0.1 < arrivals[k]]
+        assert held, "a 0.35 s stall holds the fixes sent behind it"
+        assert all(arrivals[j] == arrivals[k] for j in held)  # released together with the lost one
+
+
+def test_after_a_timeout_slow_start_lets_one_packet_go_in_the_first_round_trip_then_two_then_four():
+    state = LinkState(LinkModel(delay=Delay(0.5)), np.random.default_rng(0))
+    for k in range(20):  # a steady stream 0.1 s apart: the smoothed gap settles near 0.1
+        state.carry(k * 0.1, 100, way="stream")
+    state.slow_start, state.sent_since = 2.0, 0  # as after a retransmission timeout at 2 s
+    departures = [state.carry(2.0 + k * 0.01, 100, way="stream").copies[0].at - 0.5 for k in range(7)]
+    rounds = [round((d - 2.0) / state.tcp.srtt) for d in departures]
+    assert rounds == [0, 1, 1, 2, 2, 2, 2]

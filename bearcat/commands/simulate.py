@@ -19,7 +19,7 @@ from pathlib import Path
 from bearcat import arguments
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.output import Output
-from bearcat.scenarios.schema import list_scenarios, load_scenario
+from bearcat.scenarios.schema import TRANSPORTS, list_scenarios, load_scenario
 from bearcat.scenarios.simulate import simulate
 from bearcat.solve_ahead import solve_ahead
 from bearcat.writing import make_directory, writing
@@ -35,6 +35,11 @@ def register(subparsers) -> None:
     p.add_argument("--trials", type=int, default=1, metavar="N", help="games to play, seeds S, S+1, ... (default 1)")
     p.add_argument("--seed", type=arguments.seed, metavar="S", help="seed of the first trial (default: the scenario's)")
     p.add_argument("--netem", metavar="PROFILE", help="network profile to use instead of the scenario's")
+    p.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        help="how fixes and guidance travel: tcp (retransmitted, late) or udp (lost); default: the scenario's",
+    )
     p.add_argument("--out", type=Path, metavar="DIR", help="keep each trial's event log and outcome here")
     p.add_argument(
         "--json",
@@ -59,7 +64,7 @@ def run(args) -> int:
     for seed in range(first, first + args.trials):
         events = None if args.out is None else args.out / f"seed-{seed}" / "events.jsonl"
         with nullcontext() if args.out is None else writing(args.out, "run directory"):
-            outcome = simulate(scenario, seed=seed, netem=args.netem, events=events)
+            outcome = simulate(scenario, seed=seed, netem=args.netem, transport=args.transport, events=events)
             record = asdict(outcome)
             if events is not None:
                 (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")
@@ -71,6 +76,7 @@ def run(args) -> int:
     summary = {
         "scenario": scenario.name,
         "netem": args.netem or scenario.netem,
+        "transport": args.transport or scenario.transport,
         "trials": args.trials,
         "wins": dict(sorted(tally.items())),
     }

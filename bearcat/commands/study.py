@@ -10,6 +10,7 @@ from pathlib import Path
 from bearcat import arguments
 from bearcat.output import Output
 from bearcat.progress import counting
+from bearcat.scenarios.schema import TRANSPORTS
 from bearcat.scenarios.studies import STUDIES
 from bearcat.writing import make_directory, writing
 
@@ -26,6 +27,12 @@ def register(subparsers) -> None:
     p.add_argument("--trials", type=int, default=50, metavar="N", help="games per scenario and profile (default 50)")
     p.add_argument("--seed", type=arguments.seed, default=0, metavar="S", help="seed of the first game (default 0)")
     p.add_argument("--netem", nargs="+", metavar="PROFILE", help="profiles to compare (go-no-go; default all four)")
+    p.add_argument(
+        "--transport",
+        nargs="+",
+        choices=TRANSPORTS,
+        help="transports to compare (default: each scenario's own): tcp, udp or both",
+    )
     p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per core)")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
     p.add_argument(
@@ -55,7 +62,7 @@ def run(args) -> int:
     for name in STUDIES[args.study]["scenarios"]:
         scenario = load_scenario(name)
         solve_ahead(scenario, scenario.netem)
-    tasks = study_tasks(args.study, args.trials, args.seed, args.netem)
+    tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
     with writing(out, "results directory"):
         with counting(len(tasks), args.study, "game") as finished:
             results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=finished)
@@ -84,14 +91,16 @@ def _search_table(rows) -> str:
 
 def _goes_table(rows) -> str:
     lines = [
-        f"{'scenario':<26}{'network':<13}{'games':>6}{'attacker wins':>15}{'goes':>6}{'false goes':>12}"
-        f"{'really open':>13}{'of them won':>13}"
+        f"{'scenario':<26}{'network':<17}{'games':>6}{'attacker wins':>15}{'95% interval':>14}{'goes':>6}"
+        f"{'false goes':>12}{'really open':>13}{'of them won':>13}"
     ]
     for r in rows:
         rate = "" if r["false_go_rate"] is None else f" ({100 * r['false_go_rate']:.0f}%)"
+        low, high = r["attacker_win_interval"]
+        network = f"{r['netem'] or 'its own'}/{r['transport']}"
         lines.append(
-            f"{r['scenario']:<26}{r['netem'] or 'its own':<13}{r['games']:>6}"
-            f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){r['goes']:>6}{r['false_goes']:>6}{rate:<6}"
-            f"{r['goes_really_open']:>13}{r['really_open_won']:>13}"
+            f"{r['scenario']:<26}{network:<17}{r['games']:>6}"
+            f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){100 * low:>7.0f}-{100 * high:.0f}%"
+            f"{r['goes']:>6}{r['false_goes']:>6}{rate:<6}{r['goes_really_open']:>13}{r['really_open_won']:>13}"
         )
     return "\n".join(lines)
