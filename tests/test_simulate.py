@@ -28,10 +28,10 @@ def cache(tmp_path_factory, monkeypatch):
     monkeypatch.setenv("BEARCAT_CACHE_DIR", str(tmp_path_factory.getbasetemp() / "cache"))
 
 
-def play(tmp_path, seed=0, netem=None, name="run", **kw):
+def play(tmp_path, seed=0, netem=None, name="run", transport=None, **kw):
     scenario = load_scenario(write_scenario(tmp_path, **kw))
     events = tmp_path / name / "events.jsonl"
-    return simulate(scenario, seed=seed, netem=netem, events=events), read_events(events)
+    return simulate(scenario, seed=seed, netem=netem, transport=transport, events=events), read_events(events)
 
 
 def test_a_game_finishes_with_a_winner_and_a_reason_the_rules_give(tmp_path):
@@ -88,7 +88,7 @@ def test_an_agent_that_raises_is_recorded_and_counted_and_the_game_goes_on(tmp_p
 
 
 def test_guidance_comes_from_fixes_the_network_delivered(tmp_path):
-    _outcome, events = play(tmp_path, netem="3g-degraded", seed=1)
+    _outcome, events = play(tmp_path, netem="3g-degraded", seed=1, transport="udp")
     impaired = [e for e in events if e["event"] == "impaired"]
     actions = {e["action"] for e in impaired}
     assert "dropped" in actions and "delivered" in actions
@@ -279,3 +279,15 @@ def test_keys_steer_a_keyboard_walker_and_space_stops_it():
     assert keyboard.press("a") and keyboard.decide(0.0, None, None, None).tolist() == [-1.0, 0.0]
     assert not keyboard.press("z") and keyboard.decide(0.0, None, None, None).tolist() == [-1.0, 0.0]
     assert keyboard.press("space") and keyboard.decide(0.0, None, None, None) is None
+
+
+def test_over_tcp_no_fix_is_lost_but_some_arrive_late_in_bursts(tmp_path):
+    """The same game with fixes over tcp/: the shim's TCP stream loses nothing
+    and holds what follows a loss, which then arrives in a burst."""
+    _outcome, events = play(tmp_path, netem="3g-degraded", seed=1, transport="tcp")
+    fixes = [e for e in events if e["event"] == "impaired" and "/fix/" in e["key"] and e["receiver"] == "gs"]
+    assert fixes and not [e for e in fixes if e["action"] == "dropped"]
+    late = [e for e in fixes if any(r.startswith("retransmitted") for r in e["reasons"])]
+    assert late and min(e["delay"] for e in late) > 0.5
+    arrivals = sorted(e["t"] + e["delay"] for e in fixes)
+    assert sum(b - a < 0.002 for a, b in itertools.pairwise(arrivals)) > len(late)  # what waited came with it
