@@ -154,13 +154,13 @@ def through_the_shim(profile: str, transport: str, seconds: float, seeds: int = 
             sender, receiver, key, size = directions[name]
             for d in shim.transmit(sender, receiver, key, b"\0" * size, t):
                 arrivals[name].append((seed * count + seq, t, d.at))
-    return {name: (seeds * count, arrivals[name]) for name in directions}
+    return {name: (seeds * count, arrivals[name], seeds) for name in directions}
 
 
 # ---------------------------------------------------------------------- the table
 
 
-def measure(sent: int, arrivals: list) -> dict:
+def measure(sent: int, arrivals: list, runs: int = 1) -> dict:
     """Delivered fraction with its 95 % interval, latency quantiles (ms) and
     burst share of one direction's arrivals (first copies). Losses come in
     bursts, so the interval is from batch means (ten batches of the stream),
@@ -169,8 +169,11 @@ def measure(sent: int, arrivals: list) -> dict:
     for seq, t_sent, t_arrived in arrivals:
         first.setdefault(seq, (t_sent, t_arrived))
     latency = np.array([a - s for s, a in first.values()]) * 1000
-    order = np.sort([a for _, a in first.values()])
-    bursts = float(np.mean(np.diff(order) < BURST)) if order.size > 1 else 0.0
+    gaps = []
+    for run in range(runs):  # the shim's seeds each make a stream of their own
+        order = np.sort([a for seq, (_, a) in first.items() if seq * runs // sent == run])
+        gaps.extend(np.diff(order))
+    bursts = float(np.mean(np.array(gaps) < BURST)) if gaps else 0.0
     p50, p90, p99 = np.percentile(latency, [50, 90, 99]) if latency.size else (np.nan,) * 3
     batches = np.array_split(np.isin(np.arange(sent), list(first)), 10)
     spread = 1.96 * np.std([b.mean() for b in batches], ddof=1) / np.sqrt(len(batches))
