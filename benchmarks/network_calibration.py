@@ -45,7 +45,8 @@ GUIDANCE_BYTES = 2000
 BURST = 0.002  # s: an arrival this soon after the one before it is part of a burst
 FIX_KEY = "bearcat/calibration/fix/phone"
 GUIDANCE_KEY = "bearcat/calibration/guidance/phone"
-SETTLE = 2.0  # s before the streams start, and after they end
+SETTLE = 2.0  # s between the phone's subscription and its first fix
+DRAIN = 15.0  # s the phone waits, after its last fix, for a quiet link: a stalled TCP stream delivers seconds late
 SHIM_SEEDS = 10
 
 
@@ -79,7 +80,9 @@ def phone(args) -> None:
         for seq in range(int(args.seconds / PERIOD)):
             s.put(FIX_KEY, message(seq, FIX_BYTES), reliable=False)
             time.sleep(PERIOD)
-        time.sleep(SETTLE * 2)
+        last_fix = time.time()
+        while time.time() - max([last_fix] + [a[-1] for a in arrivals[-1:]]) < DRAIN:
+            time.sleep(0.1)
     Path(args.record).write_text(json.dumps(arrivals))
 
 
@@ -100,7 +103,13 @@ def through_the_kernel(profile: str, transport: str, seconds: float) -> dict:
             ZenohSession("router", config(listen=listen, mode="router", lease_ms=lease_ms)),
             ZenohSession("gs", config(listen=[], connect=[loopback], mode="client", lease_ms=lease_ms)) as gs,
         ):
-            gs.subscribe(FIX_KEY, lambda key, payload, sender: fixes.append((*read(payload), time.time())))
+            phone_ready = threading.Event()  # a fix came: the phone has subscribed to its guidance
+
+            def on_fix(key, payload, sender):
+                fixes.append((*read(payload), time.time()))
+                phone_ready.set()
+
+            gs.subscribe(FIX_KEY, on_fix)
             record = Path(work) / "phone.json"
             command = [sys.executable, __file__, "--phone", "--connect", outside, "--transport", transport]
             command += ["--profile", profile]
@@ -111,7 +120,9 @@ def through_the_kernel(profile: str, transport: str, seconds: float) -> dict:
             stop = threading.Event()
 
             def guide():
-                time.sleep(SETTLE)
+                while not phone_ready.wait(0.1):
+                    if stop.is_set():
+                        return
                 for seq in range(int(seconds / PERIOD)):
                     if stop.is_set():
                         return
@@ -120,7 +131,7 @@ def through_the_kernel(profile: str, transport: str, seconds: float) -> dict:
 
             guiding = threading.Thread(target=guide)
             guiding.start()
-            code = child.wait(timeout=seconds + 60)
+            code = child.wait(timeout=seconds + 120)
             stop.set()
             guiding.join()
             if code != 0:

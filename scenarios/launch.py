@@ -150,6 +150,7 @@ def launch(
         ZenohSession("launcher", config(listen=places.listen, mode="router", lease_ms=lease_ms)) as session,
         closing(EventLog(out / "events.jsonl")) as record,
     ):
+        say(places.describe(netem))
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
         (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
         inbox = Inbox("launcher")

@@ -56,6 +56,10 @@ class LocalPeers:
     def game_started(self, t: float) -> None:
         """The game started at Unix time ``t``."""
 
+    def describe(self, netem: str) -> str:
+        """What impairs the run's traffic, for the launcher to say."""
+        return f"network: on this host; each peer's shim impairs the messages it receives by profile {netem}"
+
 
 class KernelPeers(LocalPeers):
     """Peers in namespaces behind a kernel network impairing packets with profile ``netem``."""
@@ -93,6 +97,9 @@ class KernelPeers(LocalPeers):
 
     def game_started(self, t: float) -> None:
         self.network.start(t)
+
+    def describe(self, netem: str) -> str:
+        return self.network.describe()
 
 
 def _child(command: list[str], log: Path) -> subprocess.Popen:

@@ -115,6 +115,7 @@ def test_a_live_game_under_3g_in_kernel_mode_ends_with_a_verdict(tmp_path):
     launcher = run_kernel_game(tmp_path, "--netem", "3g")
     output, _ = launcher.communicate(timeout=600)
     assert launcher.returncode == 0, output
+    assert "impaired by profile 3g in an NFQUEUE hub (this kernel has" in output  # says which machinery
     outcome = json.loads((tmp_path / "run" / "outcome.json").read_text())
     assert outcome["ended"] and outcome["winner"] in ("attacker", "defender"), outcome
     report = json.loads((tmp_path / "run" / "network.json").read_text())

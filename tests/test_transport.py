@@ -5,12 +5,14 @@ on the session it travels on, and receives every message exactly once."""
 import os
 import socket
 import subprocess
+import threading
 import time
 from contextlib import contextmanager
 
 import pytest
 
 from bearcat.bus import keys
+from bearcat.bus.errors import BusError
 from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
 
 GAME = "g"
@@ -114,3 +116,31 @@ def test_fixes_travel_over_udp_and_state_over_tcp():
                 on, off = ("udp", "tcp") if kind == "fix" else ("tcp", "udp")
                 assert carried[on] >= payload, (kind, carried)
                 assert carried[off] < 0.1 * payload, (kind, carried)  # keep-alives only
+
+
+def test_a_udp_client_keeps_trying_until_its_router_answers():
+    """Zenoh does not retransmit its handshake over udp/, so one lost packet
+    (here: no router yet) must not end a phone's attempt to join."""
+    endpoint = f"udp/127.0.0.1:{free_port()}"
+    router = threading.Timer(
+        1.5, lambda: opened.append(ZenohSession("router", config(listen=[endpoint], mode="router")))
+    )
+    opened = []
+    router.start()
+    try:
+        started = time.monotonic()
+        with ZenohSession("a1", config(listen=[], connect=[endpoint], mode="client")) as phone:
+            assert time.monotonic() - started >= 1.0  # it opened once the router was there, not before
+            assert not phone.closed
+    finally:
+        router.join()
+        for session in opened:
+            session.close()
+
+
+def test_a_tcp_client_without_a_router_is_refused_at_once():
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    started = time.monotonic()
+    with pytest.raises(BusError, match=endpoint):
+        ZenohSession("a1", config(listen=[], connect=[endpoint], mode="client"))
+    assert time.monotonic() - started < 5.0  # a refused TCP connection is an answer: no waiting for retries

@@ -117,6 +117,19 @@ class KernelNetwork:
     def __exit__(self, *_exc) -> None:
         self.close()
 
+    def describe(self) -> str:
+        """Which machinery impairs the packets, and why not netem where the kernel has it."""
+        kernel = (
+            "this kernel has the netem qdisc, but netem has no radio promotion after idle, no outage windows"
+            " counted from the start of the game and not the shim's draws, so the hub applies the profile"
+            if self.netem
+            else "this kernel has no netem qdisc, so the hub applies the profile"
+        )
+        return (
+            f"network: kernel, {self._subnet}; each peer in a namespace of its own, its packets impaired by"
+            f" profile {self.profile} in an NFQUEUE hub ({kernel})"
+        )
+
     @property
     def router(self) -> str:
         return str(self._address(0, 1))
