@@ -151,7 +151,7 @@ class LinkState:
         if m.rate > 0:
             start = max(start, self.busy_until) + size / m.rate
             self.busy_until = start
-        packets = max(1, -(-size // MSS))
+        packets = 1 if way == "packet" else max(1, -(-size // MSS))  # an IP packet of 1500 bytes is still one
         if way == "stream":
             return self._stream(start, packets, reasons)
         return self._datagram(start, packets, reasons, overtakes=way == "packet")

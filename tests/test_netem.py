@@ -364,3 +364,18 @@ def test_after_a_timeout_slow_start_lets_one_packet_go_in_the_first_round_trip_t
     departures = [state.carry(2.0 + k * 0.01, 100, way="stream").copies[0].at - 0.5 for k in range(7)]
     rounds = [round((d - 2.0) / state.tcp.srtt) for d in departures]
     assert rounds == [0, 1, 1, 2, 2, 2, 2]
+
+
+def test_an_ip_packet_draws_its_loss_once_and_a_message_once_per_segment():
+    """The kernel hub sees IP packets up to the MTU (1500 bytes with their
+    headers): each is one draw. A 3000-byte message needs three segments,
+    and over a datagram link it is lost if any of them is."""
+    n = 4000
+
+    def lost(way, size):
+        link = LinkState(LinkModel(loss=0.3), np.random.default_rng(5))
+        return np.mean([link.carry(0.1 * k, size, way=way).lost is not None for k in range(n)])
+
+    spread = 4 * math.sqrt(0.25 / n)
+    assert abs(lost("packet", 1500) - 0.3) < spread
+    assert abs(lost("datagram", 3000) - (1 - 0.7**3)) < spread
