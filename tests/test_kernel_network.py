@@ -2,8 +2,8 @@
 
 The link carries the profile's delay and loss (measured on a stream of UDP
 probes, independently of the hub's own report), a live game in kernel mode
-ends with a verdict, and a launcher killed with SIGKILL leaves no process,
-interface or route behind. These tests need root and netfilterqueue; they
+ends with a verdict, and a run ended by Ctrl-C, by a peer's death or by a
+SIGKILL of its launcher leaves no process, interface or route behind. These tests need root and netfilterqueue; they
 skip with the reason otherwise (CI runs them as root).
 """
 
@@ -129,11 +129,7 @@ def test_a_live_game_under_3g_in_kernel_mode_ends_with_a_verdict(tmp_path):
 @needs_kernel
 def test_a_launcher_killed_with_sigkill_leaves_nothing_behind(tmp_path):
     launcher = run_kernel_game(tmp_path, "--netem", "wifi")
-    seen = ""
-    end = time.monotonic() + 300
-    while "game started" not in seen and time.monotonic() < end:
-        seen += launcher.stdout.readline()
-    assert "game started" in seen, seen
+    wait_for_the_start(launcher)
     assert leftovers()["interfaces"], "the run's link to its hub is up while it plays"
     os.kill(launcher.pid, signal.SIGKILL)
     launcher.wait(timeout=10)
@@ -142,6 +138,32 @@ def test_a_launcher_killed_with_sigkill_leaves_nothing_behind(tmp_path):
         time.sleep(0.1)
     assert peers_of(tmp_path) == []
     assert leftovers() == {"interfaces": [], "routes": []}
+
+
+@needs_kernel
+@pytest.mark.parametrize("ending", ["ctrl-c", "a walker's death"])
+def test_a_run_ended_by_ctrl_c_or_by_a_peers_death_leaves_nothing_behind(tmp_path, ending):
+    launcher = run_kernel_game(tmp_path, "--netem", "wifi")
+    wait_for_the_start(launcher)
+    if ending == "ctrl-c":
+        os.killpg(launcher.pid, signal.SIGINT)  # what a terminal sends to its foreground group
+    else:
+        command = {p: Path(f"/proc/{p}/cmdline").read_text().replace("\0", " ") for p in peers_of(tmp_path)}
+        (walker,) = [p for p, line in command.items() if line.startswith(sys.executable) and "--id defender" in line]
+        os.kill(walker, signal.SIGKILL)
+    output, _ = launcher.communicate(timeout=120)
+    outcome = json.loads((tmp_path / "run" / "outcome.json").read_text())
+    assert outcome["ended"] or "interrupted" in outcome["reason"], output
+    assert peers_of(tmp_path) == []
+    assert leftovers() == {"interfaces": [], "routes": []}
+
+
+def wait_for_the_start(launcher: subprocess.Popen) -> None:
+    seen = ""
+    end = time.monotonic() + 300
+    while "game started" not in seen and time.monotonic() < end:
+        seen += launcher.stdout.readline()
+    assert "game started" in seen, seen
 
 
 def peers_of(tmp_path: Path) -> list[int]:
