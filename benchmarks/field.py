@@ -29,6 +29,7 @@ import argparse
 import asyncio
 import contextlib
 import json
+import random
 import subprocess
 import sys
 import tempfile
@@ -39,6 +40,8 @@ from pathlib import Path
 import numpy as np
 
 GAME = "bench"
+START_KEY = "bench/start"
+STARTUP = 120.0  # s for every phone to come up
 
 
 def phone(args) -> None:
@@ -70,8 +73,14 @@ def phone(args) -> None:
 
         session.subscribe(keys.guidance(GAME, args.phone), on_guidance)
         session.subscribe(f"bench/echo/{args.phone}/back", on_echo)
+        # Every phone starts on the ground station's word, once all are up: in
+        # namespaces the set-up of fifty takes longer than one's warm-up.
+        started = threading.Event()
+        session.subscribe(START_KEY, lambda key, payload, sender: started.set())
         session.declare_token(keys.alive(GAME, "phone", args.phone))
-        time.sleep(args.warmup)
+        if not started.wait(STARTUP):
+            raise SystemExit(f"phone {args.phone}: no start in {STARTUP:g} s")
+        time.sleep(args.warmup + random.Random(args.phone).uniform(0.0, 0.1))  # phones out of step, as in a field
         end = time.time() + args.duration
         seq, due = 0, time.monotonic()
         while time.time() < end:
@@ -154,6 +163,10 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -
 
             async def serve():
                 task = asyncio.create_task(run_peer([service], session, GAME))
+                deadline = time.monotonic() + STARTUP
+                while sum("/phone/" in k for k in seen) < n and time.monotonic() < deadline:
+                    await asyncio.sleep(0.05)
+                session.put(START_KEY, b"")
                 await asyncio.sleep(duration + 12.0)
                 task.cancel()
                 await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
