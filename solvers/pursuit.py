@@ -325,6 +325,22 @@ def voronoi_cell(domain, evader, pursuers) -> np.ndarray:
     return _clip_cell(d, e, p, _MERGE * _size(d))[0]
 
 
+def line_of_control(domain, evader, pursuers, k: int) -> np.ndarray:
+    """Pursuer ``k``'s stretch of the boundary of S_e (its line of control,
+    5.3.1): the two ends (2, 2), or (0, 2) if its bisector does not bound
+    S_e. Read from the clip that made the cell, not by measuring distances
+    afterwards, which rounding makes unreliable."""
+    d = _domain(domain)
+    e, p = _agents(d, evader, pursuers)
+    if not 0 <= k < p.shape[0]:
+        raise InputError(f"there is no pursuer {k}: the pursuers are 0 to {p.shape[0] - 1}")
+    cell, owners = _clip_cell(d, e, p, _MERGE * _size(d))
+    for j in range(cell.shape[0]):
+        if owners[j] == k:  # the edge arriving at corner j runs along pursuer k's bisector
+            return np.array([cell[j - 1], cell[j]])
+    return np.empty((0, 2))
+
+
 def convex_area_gradient(domain, evader, pursuers) -> AreaGradient:
     """|S_e| and its derivatives in every agent's position (Lemma 3, eq. 5.12)."""
     d = _domain(domain)

@@ -22,6 +22,7 @@ from bearcat.solvers.pursuit import (
     area_minimising_headings,
     convex_area_gradient,
     evader_area_gradient,
+    line_of_control,
     pure_pursuit_headings,
     voronoi_cell,
 )
@@ -110,6 +111,11 @@ def test_cell_matches_shapely_halfplane_intersection(name):
             on_bisector = shapely_line_of_control(theirs, e, q)
             assert g.active[i] == (on_bisector > 1e-6), (e, p, i)
             assert g.line_length[i] == pytest.approx(on_bisector, abs=1e-6)
+            ends = line_of_control(domain, e, p, i)
+            assert len(ends) == (2 if g.active[i] else 0)
+            if len(ends):  # a stretch of i's bisector, as long as shapely finds it
+                assert np.hypot(*(ends[1] - ends[0])) == pytest.approx(on_bisector, abs=1e-6)
+                np.testing.assert_allclose(np.hypot(*(ends - q).T), np.hypot(*(ends - e).T), atol=1e-9)
             if not g.active[i]:
                 shadowed += 1
                 assert np.all(g.gradient[i] == 0)
@@ -119,6 +125,8 @@ def test_cell_matches_shapely_halfplane_intersection(name):
 def test_pursuer_behind_another_has_no_line_of_control():
     g = convex_area_gradient(SQUARE, [2.0, 5.0], [[4.0, 5.0], [7.0, 5.0]])
     assert g.active.tolist() == [True, False]
+    np.testing.assert_allclose(line_of_control(SQUARE, [2.0, 5.0], [[4.0, 5.0], [7.0, 5.0]], 0), [[3, 0], [3, 10]])
+    assert line_of_control(SQUARE, [2.0, 5.0], [[4.0, 5.0], [7.0, 5.0]], 1).shape == (0, 2)
     assert g.area == pytest.approx(30.0)
     np.testing.assert_allclose(g.gradient[1], 0.0)
     np.testing.assert_allclose(g.line_length, [10.0, 0.0])

@@ -259,7 +259,11 @@ def test_aided_pursuers_capture_the_evader_and_see_their_boundary(tmp_path):
     # The evader's cell is shown, and its area only shrinks as the chase goes on.
     areas = [m["value"] for m in answered if m["agent"] == "pursuer-1"]
     assert areas[0] > 1000 and areas[-1] < 0.2 * areas[0]
-    assert all(m["boundary"] for m in answered[len(answered) // 2 :])
+    # Late in the chase the evader's cell is bounded by some pursuer's line of
+    # control at every moment (a pursuer behind another has none, 5.3.1).
+    late = [m for m in answered if m["t"] >= answered[len(answered) // 2]["t"]]
+    bounded = {m["t"] for m in late if m["boundary"]}
+    assert bounded == {m["t"] for m in late}
 
 
 def test_against_real_players_the_referee_judges_on_fixes_and_says_so():

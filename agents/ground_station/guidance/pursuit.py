@@ -21,13 +21,13 @@ class PursuitAdvisor:
     metres."""
 
     def __init__(self, game_map: Map, *, evader: str, pursuers) -> None:
-        from bearcat.solvers.pursuit import area_minimising_headings, voronoi_cell
+        from bearcat.solvers.pursuit import area_minimising_headings, line_of_control, voronoi_cell
 
         self.map = game_map
         self.evader, self.pursuers = evader, tuple(pursuers)
         ring = np.asarray(game_map.area.exterior.coords)[:-1]
         self.domain = ring if game_map.area.exterior.is_ccw else ring[::-1]
-        self._headings, self._cell = area_minimising_headings, voronoi_cell
+        self._headings, self._cell, self._line = area_minimising_headings, voronoi_cell, line_of_control
         self._last: dict[str, tuple[tuple, dict]] = {}
 
     def state(self, message: GameState) -> None:
@@ -50,18 +50,15 @@ class PursuitAdvisor:
         try:
             heading = self._headings(self.domain, e, ps)[k]
             cell = self._cell(self.domain, e, ps)
+            line = self._line(self.domain, e, ps, k)
         except InputError as exc:
             return {"game": "pursuit", "note": str(exc)[:200]}
-        # Pursuer k's active boundary: the cell's corners as far from it as from the evader.
-        on_line = [
-            v for v in cell if abs(np.hypot(*(v - ps[k])) - np.hypot(*(v - e))) < 1e-6 * max(1.0, np.hypot(*(v - e)))
-        ]
         area = shapely.Polygon(cell).area if len(cell) >= 3 else 0.0
         fields = {"game": "pursuit", "region_of": self.evader, "value": float(area)}
         if np.any(heading):
             fields["heading"] = bearing(*heading)
         if len(cell) >= 3:
             fields["region"] = on_the_wire(self.map, [np.vstack([cell, cell[:1]])])
-        if len(on_line) >= 2:
-            fields["boundary"] = on_the_wire(self.map, [np.array(on_line[:2])])
+        if len(line):
+            fields["boundary"] = on_the_wire(self.map, [line])
         return fields
