@@ -78,12 +78,16 @@ class Truth(Message, tag="truth"):
 
 
 class Report(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
-    """An agent as the guidance saw it: its last delivered fix and that fix's time."""
+    """An agent as the guidance saw it: its last delivered fix and that fix's
+    time; ``radius`` (metres) bounds where it may be by the guidance's time,
+    its top speed times the fix's age plus the fix's 95 % error (None where
+    the ground station does not know its top speed)."""
 
     agent: Name
     t: Time
     lat: Latitude
     lon: Longitude
+    radius: Metres | None = None
 
 
 class Guidance(Message, tag="guidance"):
@@ -99,8 +103,10 @@ class Guidance(Message, tag="guidance"):
     game of limited visibility, as last seen by the agent's side);
     ``possible`` where an unseen opponent may be (P_D of thesis 6.2), and
     ``worst_case`` whether ``value``, ``heading`` and ``go`` hold against
-    every one of those places; ``seen_by`` the opponents' UAVs that have
-    just seen this agent.
+    every one of those places; ``uncertain`` that the answer, robust to where
+    the players may be (each report's ``radius``), differs from the one the
+    positions as reported would give; ``seen_by`` the opponents' UAVs that
+    have just seen this agent.
 
     Every point of ``region``, ``boundary`` and ``possible`` is a WGS84
     ``[lon, lat]`` pair, GeoJSON's order (RFC 7946), as in the maps: a ring
@@ -119,6 +125,7 @@ class Guidance(Message, tag="guidance"):
     reports: Annotated[list[Report], msgspec.Meta(max_length=64)] = []
     possible: Lines = []
     worst_case: bool = False
+    uncertain: bool = False
     seen_by: Annotated[list[Name], msgspec.Meta(max_length=64)] = []
     note: Text = ""
 

@@ -22,6 +22,7 @@ from bearcat.agents.ground_station.guidance import (
     ReachAvoidAdvisor,
     SearchAdvisor,
 )
+from bearcat.agents.ground_station.guidance.fixes import Uncertainty
 from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.agents.ground_station.sight import Sight
 from bearcat.agents.ground_station.uav_tasking import Uav, UavTasker
@@ -190,7 +191,13 @@ class _CtfGame:
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
         advisor = CtfAdvisor(
-            s.map, self.solved(progress), attacker=self.attacker.id, defender=self.defender.id, phase=self.phase
+            s.map,
+            self.solved(progress),
+            attacker=self.attacker.id,
+            defender=self.defender.id,
+            phase=self.phase,
+            robust=[a.id for a in s.agents if s.robust(a)],
+            uncertainty=_uncertainty(s),
         )
         if s.uavs:
             advisor = SearchAdvisor(advisor, self.tasker(), self.sight.side("attacker"))
@@ -203,6 +210,7 @@ class _CtfGame:
             aided={a.id: a.aided for a in s.agents},
             rate=s.guidance_rate,
             sight=self.sight if limited or s.uavs else None,
+            uncertainty=_uncertainty(s),
         )
 
     def tasker(self) -> UavTasker:
@@ -298,7 +306,13 @@ class _PursuitGame:
         s = self.scenario
         advisor = PursuitAdvisor(s.map, evader=self.evader.id, pursuers=[p.id for p in self.pursuers])
         return GuidanceService(
-            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
+            s.name,
+            s.map,
+            s.ids,
+            advisor=advisor,
+            aided={a.id: a.aided for a in s.agents},
+            rate=s.guidance_rate,
+            uncertainty=_uncertainty(s),
         )
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
@@ -350,9 +364,17 @@ class _ReachAvoidGame:
             speeds={a.id: a.speed for a in s.agents},
             capture_radius=self.radius,
             spacing=s.rules.spacing or max(xmax - xmin, ymax - ymin) / 200,
+            robust=s.robust(self.attacker),
+            uncertainty=_uncertainty(s),
         )
         return GuidanceService(
-            s.name, s.map, s.ids, advisor=advisor, aided={a.id: a.aided for a in s.agents}, rate=s.guidance_rate
+            s.name,
+            s.map,
+            s.ids,
+            advisor=advisor,
+            aided={a.id: a.aided for a in s.agents},
+            rate=s.guidance_rate,
+            uncertainty=_uncertainty(s),
         )
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
@@ -361,6 +383,12 @@ class _ReachAvoidGame:
         opponents = tuple(d.id for d in self.defenders) if spec.team == "attacker" else (self.attacker.id,)
         situation = behaviours.Situation(spec.id, spec.team, opponents, self.goals["capture"], None, self._navigator)
         return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture")
+
+
+def _uncertainty(scenario: Scenario) -> Uncertainty:
+    """How far each player and UAV may be from its last fix, at its top speed."""
+    speeds = {a.id: a.speed for a in scenario.agents} | {u.id: u.speed for u in scenario.uavs}
+    return Uncertainty(speeds, scenario.guidance_confidence)
 
 
 GAMES = {"ctf": _CtfGame, "pursuit": _PursuitGame, "reach-avoid": _ReachAvoidGame}

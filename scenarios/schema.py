@@ -18,6 +18,8 @@ whether their phone shows reachability guidance::
 
     [guidance]
     rate = 10.0                  # Hz, per agent
+    robust = true                # answers hold wherever stale, noisy fixes allow the players to be
+    confidence = 0.95            # of a fix's GPS error circle they guard against (0: its age only)
 
     [[agent]]
     id = "attacker"
@@ -26,6 +28,7 @@ whether their phone shows reachability guidance::
     speed = 3.0                  # top speed, m/s on full-speed terrain
     behaviour = "fake-out"
     aided = true
+    robust = false               # optional: this agent's guidance against guidance.robust
 
     [[uav]]                      # optional: quadrotors flying for a team (thesis 6.2)
     id = "q1"
@@ -160,6 +163,7 @@ class AgentSpec(_Table, tag_field="behaviour"):
     start: Point
     speed: WalkingSpeed
     aided: bool = True
+    robust: bool | None = None  # robust guidance for this agent; None: the scenario's guidance.robust
     fix_rate: Rate = 1.0
     reaction: Annotated[float, Meta(ge=0.0, le=10.0, extra={"unit": "s"})] = 0.4  # from a display change to a turn
     heading_error: Angle = 10.0  # standard deviation of following a displayed heading
@@ -268,6 +272,13 @@ class ScenarioTable(_Table):
 
 class GuidanceTable(_Table):
     rate: Rate = 10.0
+    # Answers that hold wherever the players may be, not only at their reports
+    # (capture-the-flag, search and reach-avoid guidance; pursuit has no robust form).
+    robust: bool = True
+    # The share of a fix's GPS error the robust answers guard against (the
+    # radius of its 95 % circle by default); 0: only how far an agent may
+    # have moved since its fix.
+    confidence: Annotated[float, Meta(ge=0.0, le=0.999)] = 0.95
 
 
 class ScenarioFile(_Table):
@@ -290,6 +301,8 @@ class Scenario:
     seed: int
     rules: CtfRules | ReachAvoidRules | PursuitRules
     guidance_rate: float
+    robust_guidance: bool
+    guidance_confidence: float
     agents: tuple[AgentSpec, ...]
     description: str
     text: str  # the TOML it was read from, served to peers that ask
@@ -298,6 +311,10 @@ class Scenario:
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
+
+    def robust(self, agent: AgentSpec) -> bool:
+        """Whether ``agent``'s guidance is robust: its own setting, else the scenario's."""
+        return self.robust_guidance if agent.robust is None else agent.robust
 
     def team(self, name: str) -> list[AgentSpec]:
         return [a for a in self.agents if a.team == name]
@@ -372,6 +389,8 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         seed=head.seed,
         rules=rules,
         guidance_rate=file.guidance.rate,
+        robust_guidance=file.guidance.robust,
+        guidance_confidence=file.guidance.confidence,
         agents=file.agent,
         description=head.description,
         text=text,

@@ -104,7 +104,7 @@ def test_positions_only_guidance_for_an_unaided_agent(agent):
 
 def sent_to(agent, game_map, fixes, fields) -> Guidance:
     """The guidance ``agent`` receives with ``fields``: encoded and decoded as on the bus."""
-    message = Guidance(agent=agent, seq=1, t=2.0, reports=fixes.reports(), **fields)
+    message = Guidance(agent=agent, seq=1, t=2.0, reports=fixes.reports(2.0), **fields)
     return decode(encode(message), keys.guidance("g", agent))
 
 

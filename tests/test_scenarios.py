@@ -189,8 +189,8 @@ def test_study_summaries_count_goes_false_goes_and_real_windows():
     assert (row["games"], row["attacker_wins"], row["goes"], row["false_goes"]) == (4, 1, 3, 2)
     assert (row["goes_really_open"], row["really_open_won"], row["median_go_time"]) == (2, 1, 4.0)
     assert row["false_go_rate"] == pytest.approx(2 / 3, abs=1e-3)
-    tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])
-    assert [t["seed"] for t in tasks] == [10, 11, 12] * 2 and len({t["key"] for t in tasks}) == 6
+    tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])  # 3 guidance x 2 profiles x 3 seeds
+    assert [t["seed"] for t in tasks] == [10, 11, 12] * 6 and len({t["key"] for t in tasks}) == 18
 
 
 def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():

@@ -4,9 +4,9 @@ Fixes go out at the phone's rate through the profile's GPS error (a
 time-correlated bias, worse near buildings, with dropouts) and compass
 error, as WGS84 positions. What comes back (guidance from the ground
 station) becomes the ``Screen``: the opponent's winning region, the heading
-ring, go / no-go, and every agent as last reported with that report's time,
-so a behaviour or a person reads exactly what the display shows, stale
-positions included, and the recorder can draw it.
+ring, go / no-go, and every agent as last reported with that report's time
+and the disk it may be in, so a behaviour or a person reads exactly what the
+display shows, stale positions included, and the recorder can draw it.
 """
 
 from __future__ import annotations
@@ -25,10 +25,12 @@ from bearcat.netem.models import CompassError, CompassTrack, GpsError, GpsTrack
 
 @dataclass(frozen=True)
 class Sighting:
-    """An agent as the screen shows it: where (map metres) and the time of the fix."""
+    """An agent as the screen shows it: where (map metres), the time of the
+    fix, and the radius of the disk it may be in by then (None: not known)."""
 
     position: np.ndarray
     t: float
+    radius: float | None = None
 
 
 @dataclass
@@ -44,6 +46,7 @@ class Screen:
     go: bool | None = None
     value: float | None = None
     worst_case: bool = False  # value and go hold wherever the unseen opponent may be
+    uncertain: bool = False  # the answer for where the players may be differs from the one at their reports
     boundary: list[np.ndarray] = field(default_factory=list)
     reports: dict[str, Sighting] = field(default_factory=dict)
     note: str = ""
@@ -126,12 +129,12 @@ class Phone:
             self._region_local = [to_local(ring) for ring in guidance.region]
         s.region = self._region_local
         s.region_of, s.go, s.value, s.note = guidance.region_of, guidance.go, guidance.value, guidance.note
-        s.worst_case = guidance.worst_case
+        s.worst_case, s.uncertain = guidance.worst_case, guidance.uncertain
         s.boundary = [to_local(line) for line in guidance.boundary]
         for r in guidance.reports:
             old = s.reports.get(r.agent)
             if old is None or r.t >= old.t:
-                s.reports[r.agent] = Sighting(np.array(self.map.to_local(r.lat, r.lon)), r.t)
+                s.reports[r.agent] = Sighting(np.array(self.map.to_local(r.lat, r.lon)), r.t, r.radius)
 
     def _to_local(self, points) -> np.ndarray:
         """A ring or line of the wire's ``[lon, lat]`` points in map metres."""

@@ -1,6 +1,12 @@
-"""``bearcat study fake-out|go-no-go|search``: the field studies of thesis
-3.5 and 6.2.4 as batches of simulated games, resumable, with a table at the
-end (``DIR/results.jsonl`` per game, ``DIR/summary.json``)."""
+"""``bearcat study fake-out|holding|go-no-go|search``: batches of simulated
+games, resumable, with a table and a figure at the end (``DIR/results.jsonl``
+per game, ``DIR/summary.json``, ``DIR/STUDY.png``).
+
+``--human defender`` plays the study's games live instead, one after the
+other, with a person driving the defender from the keyboard; each game is
+appended to the same results file, under its own labels, so people's results
+sit beside the models' in the same table.
+"""
 
 from __future__ import annotations
 
@@ -18,15 +24,12 @@ from bearcat.writing import make_directory, writing
 def register(subparsers) -> None:
     p = subparsers.add_parser(
         "study",
-        description="fake-out: the aided attacker's fake-out against an unaided and an aided defender (3.5.1). "
-        "go-no-go: how often an attacker's go, decided on what the network delivered, is false, per network "
-        "profile (3.5.2). search: reachability-guided UAV search against a lawnmower sweep and the nearest "
-        "unobserved point: time until the defender is found, and the attacker's wins (6.2.4).",
+        description=" ".join(f"{name}: {study.description}." for name, study in STUDIES.items()),
     )
     p.add_argument("study", choices=tuple(STUDIES))
-    p.add_argument("--trials", type=int, default=50, metavar="N", help="games per scenario and profile (default 50)")
+    p.add_argument("--trials", type=int, default=200, metavar="N", help="games per cell and profile (default 200)")
     p.add_argument("--seed", type=arguments.seed, default=0, metavar="S", help="seed of the first game (default 0)")
-    p.add_argument("--netem", nargs="+", metavar="PROFILE", help="profiles to compare (go-no-go; default all four)")
+    p.add_argument("--netem", nargs="+", metavar="PROFILE", help="profiles to play on (default: the study's)")
     p.add_argument(
         "--transport",
         nargs="+",
@@ -35,6 +38,11 @@ def register(subparsers) -> None:
     )
     p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per core)")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
+    p.add_argument(
+        "--human",
+        choices=("defender",),
+        help="a person plays this side from the keyboard, live, in the study's scenario (fake-out)",
+    )
     p.add_argument(
         "--json",
         action="store_true",
@@ -45,33 +53,53 @@ def register(subparsers) -> None:
 
 def run(args) -> int:
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.batch import run_batch
+    from bearcat.scenarios.batch import read_results, run_batch
     from bearcat.scenarios.schema import load_scenario
-    from bearcat.scenarios.studies import play_task, study_tasks, summarise, summarise_search
+    from bearcat.scenarios.studies import play_task, study_tasks
     from bearcat.solve_ahead import solve_ahead
 
     for profile in args.netem or ():
         load_profile(profile)
     if args.trials < 1:
         raise arguments.UsageError("--trials must be at least 1")
+    if args.human is not None and args.study != "fake-out":
+        raise arguments.UsageError(f"--human plays the fake-out study; {args.study} has no human side")
     arguments.check_seeds(args.seed, args.trials)
     report = Output(args.json)
     out = args.out or Path("studies") / args.study
     make_directory(out, "results directory")
+    study = STUDIES[args.study]
     # Solve each scenario's game once here, so the workers only load it.
-    for name in STUDIES[args.study]["scenarios"]:
+    for name in dict.fromkeys(cell.scenario for cell in study.cells):
         scenario = load_scenario(name)
         solve_ahead(scenario, scenario.netem)
-    tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
     with writing(out, "results directory"):
-        with counting(len(tasks), args.study, "game") as finished:
-            results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=finished)
-        rows = (summarise_search if args.study == "search" else summarise)(results.values())
+        if args.human is not None:
+            from bearcat.scenarios.human_trials import play_human_trials
+
+            play_human_trials(out, args.human, args.trials, args.seed, say=report.say)
+            results = read_results(out / "results.jsonl")
+        else:
+            tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
+            with counting(len(tasks), args.study, "game") as finished:
+                results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=finished)
+        rows = summary_rows(args.study, results.values())
         (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
-    report.say(_search_table(rows) if args.study == "search" else _goes_table(rows))
+    report.say(TABLES[args.study](rows))
     report.say(f"per-game results in {out}/results.jsonl; replay one with bearcat simulate SCENARIO --seed S --netem P")
+    from bearcat.study_figures import FIGURES
+
+    report.figure(FIGURES[args.study](rows), out / f"{args.study}.png", dpi=110)
     report.json(rows)
     return 0
+
+
+def summary_rows(study: str, results) -> list[dict]:
+    from bearcat.scenarios.studies import summarise, summarise_search
+
+    if study == "search":
+        return summarise_search(results)
+    return summarise(results, STUDIES[study].by)
 
 
 def _search_table(rows) -> str:
@@ -89,18 +117,56 @@ def _search_table(rows) -> str:
     return "\n".join(lines)
 
 
+def _rate(count: int, games: int, interval) -> str:
+    low, high = interval
+    return f"{count}/{games} {100 * count / games:.0f}% ({100 * low:.0f}-{100 * high:.0f})"
+
+
 def _goes_table(rows) -> str:
     lines = [
-        f"{'scenario':<26}{'network':<17}{'games':>6}{'attacker wins':>15}{'95% interval':>14}{'goes':>6}"
-        f"{'false goes':>12}{'really open':>13}{'of them won':>13}"
+        f"{'guidance':<18}{'network':<17}{'attacker wins (95%)':>24}{'goes':>6}{'false goes (95%)':>24}"
+        f"{'really open':>13}{'of them won':>13}"
     ]
     for r in rows:
-        rate = "" if r["false_go_rate"] is None else f" ({100 * r['false_go_rate']:.0f}%)"
-        low, high = r["attacker_win_interval"]
-        network = f"{r['netem'] or 'its own'}/{r['transport']}"
+        false = "-" if not r["goes"] else _rate(r["false_goes"], r["goes"], r["false_go_interval"])
         lines.append(
-            f"{r['scenario']:<26}{network:<17}{r['games']:>6}"
-            f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){100 * low:>7.0f}-{100 * high:.0f}%"
-            f"{r['goes']:>6}{r['false_goes']:>6}{rate:<6}{r['goes_really_open']:>13}{r['really_open_won']:>13}"
+            f"{r['guidance']:<18}{r['netem'] + '/' + r['transport']:<17}"
+            f"{_rate(r['attacker_wins'], r['games'], r['attacker_win_interval']):>24}{r['goes']:>6}{false:>24}"
+            f"{r['goes_really_open']:>13}{r['really_open_won']:>13}"
         )
     return "\n".join(lines)
+
+
+def _holding_table(rows) -> str:
+    guidance = list(dict.fromkeys(r["guidance"] for r in rows))
+    lines = [f"{'network':<17}{'report Hz':>10}" + "".join(f"{g:>26}" for g in guidance)]
+    cells = {(r["netem"] + "/" + r["transport"], r["rate"], r["guidance"]): r for r in rows}
+    for network, rate in dict.fromkeys((n, h) for n, h, _ in cells):
+        line = f"{network:<17}{rate:>10g}"
+        for g in guidance:
+            r = cells.get((network, rate, g))
+            line += f"{'-' if r is None else _rate(r['defender_wins'], r['games'], r['defender_win_interval']):>26}"
+        lines.append(line)
+    return "defender holds (defender wins, 95% interval)\n" + "\n".join(lines)
+
+
+def _fake_out_table(rows) -> str:
+    reactions = sorted({r["reaction"] for r in rows})
+    lines = ["attacker wins (95% interval) by the defender's reaction time (s)"]
+    for rate in sorted({r["rate"] for r in rows}):
+        lines.append(f"phones reporting at {rate:g} Hz")
+        lines.append(f"{'defender':<26}" + "".join(f"{t:>20g}" for t in reactions))
+        at_rate = [r for r in rows if r["rate"] == rate]
+        for defender, marking in dict.fromkeys((r["defender"], r["marking"]) for r in at_rate):
+            name = defender if marking is None else f"{defender}, marks {marking:g} m"
+            line = f"{name:<26}"
+            for t in reactions:
+                r = next(
+                    (r for r in at_rate if (r["defender"], r["marking"], r["reaction"]) == (defender, marking, t)), None
+                )
+                line += f"{'-' if r is None else _rate(r['attacker_wins'], r['games'], r['attacker_win_interval']):>20}"
+            lines.append(line)
+    return "\n".join(lines)
+
+
+TABLES = {"fake-out": _fake_out_table, "holding": _holding_table, "go-no-go": _goes_table, "search": _search_table}

@@ -1,28 +1,53 @@
 """Capture-the-flag guidance (thesis 3.5): the attacker's phone shows the
 defender's winning region R_D(x_a), its optimal heading and go (the reported
-state is an attacker win); the defender's shows R_A(x_d) and its heading."""
+state is an attacker win); the defender's shows R_A(x_d) and its heading.
+
+For an agent with robust guidance the fixes are not taken as exact: each
+player is anywhere in the disk its last fix allows (``solvers.ctf_robust``),
+go and "winning" hold against all of it, the region is the opponent's
+region against the worst of it, and ``uncertain`` says that the plain
+answer at the fixes would have said otherwise.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-from bearcat.agents.ground_station.guidance.fixes import LatestFixes, nearest_inside
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty, nearest_inside
 from bearcat.agents.ground_station.guidance.outlines import on_the_wire, polygon_rings
 from bearcat.bus.messages import GameState
 from bearcat.maps import Map
 from bearcat.maps.geodesy import bearing
 from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf_robust import RobustCtf
 from bearcat.solvers.errors import InputError
+
+RADIUS_STEP = 0.25
+"""Metres a set's radius is rounded up to, so an answer is reused while a fix ages by less."""
 
 
 class CtfAdvisor:
     """The CTF fields of a phone's guidance, from the solved sets of one game."""
 
-    def __init__(self, game_map: Map, solved: CtfQueries, *, attacker: str, defender: str, phase: str = "capture"):
+    def __init__(
+        self,
+        game_map: Map,
+        solved: CtfQueries,
+        *,
+        attacker: str,
+        defender: str,
+        phase: str = "capture",
+        robust=(),
+        uncertainty: Uncertainty | None = None,
+    ):
         self.map = game_map
         self.solved = solved
         self.attacker, self.defender = attacker, defender
         self.phase = phase
+        self.robust_for = frozenset(robust)
+        self.robust = RobustCtf(solved) if self.robust_for else None
+        rules = solved.solution.rules
+        self.uncertainty = uncertainty or Uncertainty({attacker: rules.attacker_speed, defender: rules.defender_speed})
         spacing = min(solved.geometry.grid.spacing)
         # Fixes outside the free space go to its nearest point a whisker inside.
         self._inside = game_map.free_space.buffer(-0.05 * spacing)
@@ -40,18 +65,31 @@ class CtfAdvisor:
         if self.attacker not in latest or self.defender not in latest:
             return {"game": "ctf", "note": "waiting for both players' fixes"}
         a, d = latest[self.attacker][0], latest[self.defender][0]
-        key = (a[0], a[1], d[0], d[1], self.phase)
+        radii = self.radii(fixes, now) if agent in self.robust_for else None
+        key = (a[0], a[1], d[0], d[1], self.phase, radii)
         held = self._last.get(agent)
         if held is None or held[0] != key:
-            held = self._last[agent] = (key, self.answer_at(agent, a, d))
+            held = self._last[agent] = (key, self.answer_at(agent, a, d, radii))
         return held[1]
 
-    def answer_at(self, agent: str, a: np.ndarray, d: np.ndarray) -> dict:
+    def radii(self, fixes: LatestFixes, now: float) -> tuple[float, float]:
+        """The attacker's and the defender's uncertainty radii, rounded up to ``RADIUS_STEP``."""
+        out = []
+        for player in (self.attacker, self.defender):
+            _, t, fix = fixes.latest[player]
+            r = self.uncertainty.radius(player, now - t, fix)
+            out.append(float(np.ceil(r / RADIUS_STEP) * RADIUS_STEP))
+        return tuple(out)
+
+    def answer_at(self, agent: str, a: np.ndarray, d: np.ndarray, radii=None) -> dict:
         """The CTF fields of ``agent``'s guidance with the attacker at ``a`` and
-        the defender at ``d`` (map metres; moved out of buildings first)."""
+        the defender at ``d`` (map metres; moved out of buildings first);
+        with ``radii``, robust against the disks of those radii round them."""
         try:
             a = self._placeable(a)
             d = self._placeable(d)
+            if radii is not None:
+                return self._robust_answer(agent, a, d, radii)
             report = self.solved.evaluate(a, d, self.phase)
         except InputError as exc:
             return {"game": "ctf", "note": str(exc)[:200]}
@@ -77,6 +115,24 @@ class CtfAdvisor:
             "region_of": region_of,
             "go": report.winner == "attacker" if agent == self.attacker else None,
             "value": float(report.value),
+        }
+
+    def _robust_answer(self, agent: str, a: np.ndarray, d: np.ndarray, radii) -> dict:
+        robust = self.robust
+        covers = {"attacker": robust.cover("attacker", a, radii[0]), "defender": robust.cover("defender", d, radii[1])}
+        side = "attacker" if agent == self.attacker else "defender"
+        other = "defender" if side == "attacker" else "attacker"
+        answer = robust.answer(side, covers["attacker"], covers["defender"], self.phase)
+        values = robust.region_values(other, covers[side], self.phase)
+        region = polygon_rings(self.solved.polygons(values, other))
+        return {
+            "game": "ctf",
+            "heading": None if answer.heading is None else bearing(*answer.heading),
+            "region": on_the_wire(self.map, region, self._simplify),
+            "region_of": self.defender if side == "attacker" else self.attacker,
+            "go": answer.wins if side == "attacker" else None,
+            "value": float(answer.worst),
+            "uncertain": answer.uncertain,
         }
 
     def _placeable(self, p: np.ndarray) -> np.ndarray:

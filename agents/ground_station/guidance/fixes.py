@@ -3,10 +3,14 @@
 Fixes are what the network delivered, GPS error included, so one may put an
 agent inside a building or off the map; ``nearest_inside`` moves it to the
 nearest free point before a solver is asked, as a person's phone would still
-show them somewhere.
+show them somewhere. A fix is also stale: ``Uncertainty`` bounds where its agent
+may be by now.
 """
 
 from __future__ import annotations
+
+import math
+from dataclasses import dataclass
 
 import numpy as np
 import shapely
@@ -14,6 +18,33 @@ import shapely.ops
 
 from bearcat.bus.messages import Fix, Report
 from bearcat.maps import Map
+
+DEFAULT_CONFIDENCE = 0.95
+
+
+def error_radius(sigma: float | None, confidence: float = DEFAULT_CONFIDENCE) -> float:
+    """The radius holding a fix's true position with probability
+    ``confidence``, for a circular two-axis Gaussian error of ``sigma``
+    metres per axis (2.448 sigma at 95 %; None: the sender gave no accuracy,
+    taken as exact)."""
+    return math.sqrt(-2.0 * math.log1p(-confidence)) * float(sigma or 0.0)
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """How far each agent may be from its last fix: its top speed (``speeds``)
+    times the fix's age, plus the fix's error radius at ``confidence`` (0:
+    the age alone)."""
+
+    speeds: dict
+    confidence: float = DEFAULT_CONFIDENCE
+
+    def radius(self, agent: str, age: float, fix: Fix) -> float | None:
+        """None for an agent whose top speed is not known."""
+        speed = self.speeds.get(agent)
+        if speed is None:
+            return None
+        return max(float(age), 0.0) * float(speed) + error_radius(fix.accuracy, self.confidence)
 
 
 class LatestFixes:
@@ -31,8 +62,13 @@ class LatestFixes:
             return True
         return False
 
-    def reports(self) -> list[Report]:
-        return [Report(agent, f.t, f.lat, f.lon) for agent, (_, _, f) in self.latest.items()]
+    def reports(self, now: float, uncertainty: Uncertainty | None = None) -> list[Report]:
+        """Every agent as last reported, with the radius it may be in by ``now`` where ``uncertainty`` knows it."""
+        out = []
+        for agent, (_, t, f) in self.latest.items():
+            radius = None if uncertainty is None else uncertainty.radius(agent, now - t, f)
+            out.append(Report(agent, f.t, f.lat, f.lon, radius=None if radius is None else round(min(radius, 1e7), 2)))
+        return out
 
 
 def nearest_inside(inside, point) -> np.ndarray:

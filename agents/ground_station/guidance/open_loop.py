@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from bearcat.agents.ground_station.guidance.fixes import LatestFixes, nearest_inside
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty, nearest_inside
 from bearcat.agents.ground_station.guidance.outlines import mask_rings, on_the_wire
 from bearcat.bus.messages import GameState
 from bearcat.maps import Map, rasterize
@@ -18,10 +18,25 @@ class ReachAvoidAdvisor:
     stage, the planned path through the remaining targets as a line, its
     first stretch as the heading, and go when a safe path exists; ``value``
     is the time to the last target along it. Solved on a grid of ``spacing``
-    metres on each new fix of the attacker."""
+    metres on each new fix of the attacker.
+
+    With ``robust``, each defender's capture disk grows by the radius its
+    last fix leaves it (``uncertainty``), so the safe set and go hold wherever the defenders may be; the
+    defenders' positions are then taken afresh once a second as well, as
+    their disks grow, and ``uncertain`` says the plain answer would differ."""
 
     def __init__(
-        self, game_map: Map, *, attacker: str, defenders, targets, speeds: dict, capture_radius: float, spacing: float
+        self,
+        game_map: Map,
+        *,
+        attacker: str,
+        defenders,
+        targets,
+        speeds: dict,
+        capture_radius: float,
+        spacing: float,
+        robust: bool = False,
+        uncertainty: Uncertainty | None = None,
     ) -> None:
         self.map = game_map
         self.attacker, self.defenders = attacker, tuple(defenders)
@@ -32,7 +47,9 @@ class ReachAvoidAdvisor:
         self._inside = game_map.free_space.buffer(-spacing)
         self.masks = [raster.masks[name] for name in targets]
         self.speed = {agent: v * raster.speed for agent, v in speeds.items()}
+        self.uncertainty = uncertainty or Uncertainty(dict(speeds))
         self.capture_radius = capture_radius
+        self.robust = robust
         self.stage = 0
         self._last: tuple[tuple, dict] | None = None
 
@@ -49,23 +66,29 @@ class ReachAvoidAdvisor:
         # A solve takes tens of milliseconds: redo it when the stage changes or
         # the attacker's own fix moves (once a fix period), taking the
         # defenders as last reported then; a defender's move shows at the
-        # attacker's next fix.
+        # attacker's next fix. Robust answers are also redone each second.
+        grown = [0.0] * len(self.defenders)
         key = (self.stage, points[0].tobytes())
+        if self.robust:
+            grown = [self._radius(latest[d], d, now) for d in self.defenders]
+            key += (int(now),)
         if self._last is None or self._last[0] != key:
-            self._last = (key, self._answer(points))
+            self._last = (key, self._answer(points, grown))
         return self._last[1]
 
-    def _answer(self, points) -> dict:
-        from bearcat.solvers.openloop import Defender, solve_openloop
+    def _radius(self, held, defender: str, now: float) -> float:
+        _, t, fix = held
+        return self.uncertainty.radius(defender, now - t, fix)
 
+    def _answer(self, points, grown) -> dict:
         a, *others = (self._placeable(p) for p in points)
-        defenders = [Defender(tuple(p), self.speed[d], self.capture_radius) for d, p in zip(self.defenders, others)]
-        masks = self.masks[self.stage :]
         try:
-            solution = solve_openloop(self.grid, tuple(a), [self.speed[self.attacker]] * len(masks), masks, defenders)
+            solution = self._solve(a, others, grown)
+            plain = self._solve(a, others, [0.0] * len(others)) if any(grown) else solution
         except InputError as exc:
             return {"game": "reach-avoid", "note": str(exc)[:200]}
         fields = {"game": "reach-avoid", "region_of": self.attacker, "go": solution.reached}
+        fields["uncertain"] = plain.reached != solution.reached
         fields["region"] = on_the_wire(self.map, mask_rings(self.grid, solution.stages[0].safe))
         if solution.path is not None and len(solution.path.points) > 1:
             path = solution.path.points
@@ -76,6 +99,15 @@ class ReachAvoidAdvisor:
             fields["boundary"] = on_the_wire(self.map, [path], 0.25 * min(self.grid.spacing))
             fields["value"] = float(solution.value)
         return fields
+
+    def _solve(self, a, others, grown):
+        from bearcat.solvers.openloop import Defender, solve_openloop
+
+        defenders = [
+            Defender(tuple(p), self.speed[d], self.capture_radius + r) for d, p, r in zip(self.defenders, others, grown)
+        ]
+        masks = self.masks[self.stage :]
+        return solve_openloop(self.grid, tuple(a), [self.speed[self.attacker]] * len(masks), masks, defenders)
 
     def _placeable(self, p: np.ndarray) -> np.ndarray:
         p = np.clip(p, self.grid.lo, self.grid.hi)

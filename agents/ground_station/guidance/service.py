@@ -3,8 +3,9 @@
 For each agent, on each of its new fixes and at least ten times a second
 (the scenario's rate), it takes the latest fix of every agent, as the
 ground-station laptop of thesis 3.5 did, and sends that agent a
-``Guidance``: every agent as last reported, and for an aided agent its
-advisor's answer at those positions. An unaided agent's phone shows
+``Guidance``: every agent as last reported, with the disk it may be in by
+now (``uncertainty``), and for an aided agent its advisor's
+answer at those positions. An unaided agent's phone shows
 positions only.
 
 In a game of limited visibility (a ``Sight``), each agent is told only
@@ -49,11 +50,13 @@ class GuidanceService:
         rate: float = 10.0,
         name: str = "gs",
         sight=None,
+        uncertainty=None,
     ) -> None:
         self.game, self.name, self.map = game, name, game_map
         self.agents = tuple(agents)
         self.advisor = advisor
         self.aided = dict(aided or {})
+        self.uncertainty = uncertainty
         self.period = 1.0 / rate
         self.ended = False
         self.sight = sight
@@ -115,7 +118,7 @@ class GuidanceService:
     def _send(self, agents, now: float) -> list[Send]:
         if self.ended or not agents:
             return []
-        everything = self.fixes.reports() if self.known is None else None
+        everything = self.fixes.reports(now, self.uncertainty) if self.known is None else None
         out = []
         for agent in agents:
             fixes = self.fixes if self.known is None else self.known[agent]
@@ -127,7 +130,7 @@ class GuidanceService:
                 fields = {**fields, "seen_by": [spotted[0]]}
             self.seq += 1
             self._last[agent] = now
-            reports = everything if everything is not None else fixes.reports()
+            reports = everything if everything is not None else fixes.reports(now, self.uncertainty)
             out.append(
                 Send(
                     keys.guidance(self.game, agent),
