@@ -104,7 +104,7 @@ class RobustCtf:
             "attacker": geometry.blocked,
             "defender": np.minimum(np.minimum(geometry.flag, geometry.home), geometry.blocked),
         }
-        self._step = 0.5 * min(grid.spacing)
+        self.step = 0.5 * min(grid.spacing)  # metres a heading is tried over
         self._transposed: dict[str, tuple] = {}
         angles = 2 * np.pi * np.arange(DIRECTIONS) / DIRECTIONS
         self._directions = np.stack([np.sin(angles), np.cos(angles)], axis=1)
@@ -135,12 +135,16 @@ class RobustCtf:
         if attacker.size == 1 and defender.size == 1:
             return SideAnswer(side, worst, getattr(plain, f"{side}_heading"), plain)
         if side == "attacker":
-            against = self.queries.evaluate(attacker.centre, self._corner_point(defender, d_k), phase)
             start, opponent = attacker.centre, defender
+            worst_state = (attacker.centre, self._corner_point(defender, d_k))
         else:
-            against = self.queries.evaluate(self._corner_point(attacker, a_k), defender.centre, phase)
             start, opponent = defender.centre, attacker
-        preferred = (getattr(against, f"{side}_heading"), getattr(plain, f"{side}_heading"))
+            worst_state = (self._corner_point(attacker, a_k), defender.centre)
+        try:
+            against = getattr(self.queries.evaluate(*worst_state, phase), f"{side}_heading")
+        except InputError:  # the worst corner is that of a box an obstacle cuts, inside the obstacle
+            against = None
+        preferred = (against, getattr(plain, f"{side}_heading"))
         tried = np.array([h for h in preferred if h is not None] + [tuple(d) for d in self._directions])
         k = _best_heading(
             flat,
@@ -149,7 +153,7 @@ class RobustCtf:
             self._spacing,
             self._slack,
             start,
-            self._step,
+            self.step,
             tried,
             (opponent.nodes, opponent.weights),
             side == "attacker",
