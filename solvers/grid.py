@@ -9,6 +9,7 @@ transposes, and plots transpose once at the edge.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass
 
@@ -81,10 +82,15 @@ class Grid:
         return tuple(np.meshgrid(*self.axes(), indexing="ij"))
 
     def contains(self, point) -> bool:
-        """Whether ``point`` lies within the box spanned by the nodes."""
-        p = np.asarray(point, dtype=float)
-        lo, hi = np.asarray(self.lo), np.asarray(self.hi)
-        return bool(np.all(np.isfinite(p)) and np.all(p >= lo - 1e-9) and np.all(p <= hi + 1e-9))
+        """Whether ``point`` (one point) lies within the box spanned by the nodes."""
+        coords = [float(v) for v in np.ravel(point)]
+        if len(coords) != self.ndim:
+            raise ValueError(f"a point on a {self.ndim}-D grid has {self.ndim} coordinates, got {len(coords)}")
+        return all(a - 1e-9 <= c <= b + 1e-9 for c, a, b in zip(coords, self.lo, self._hi))
+
+    @functools.cached_property
+    def _hi(self) -> tuple[float, ...]:
+        return self.hi
 
     def fractional_index(self, points) -> np.ndarray:
         """Continuous node coordinates of ``points`` (shape ``(..., ndim)``)."""

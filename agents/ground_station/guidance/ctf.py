@@ -52,6 +52,8 @@ class CtfAdvisor:
         # Fixes outside the free space go to its nearest point a whisker inside.
         self._inside = game_map.free_space.buffer(-0.05 * spacing)
         self._simplify = 0.25 * spacing
+        self._region_step = 0.5 * spacing
+        self._regions: dict[str, tuple[tuple, list]] = {}
         self._last: dict[str, tuple[tuple, dict]] = {}
 
     def state(self, message: GameState) -> None:
@@ -121,19 +123,31 @@ class CtfAdvisor:
         robust = self.robust
         covers = {"attacker": robust.cover("attacker", a, radii[0]), "defender": robust.cover("defender", d, radii[1])}
         side = "attacker" if agent == self.attacker else "defender"
-        other = "defender" if side == "attacker" else "attacker"
         answer = robust.answer(side, covers["attacker"], covers["defender"], self.phase)
-        values = robust.region_values(other, covers[side], self.phase)
-        region = polygon_rings(self.solved.polygons(values, other))
+        own = (a, radii[0]) if side == "attacker" else (d, radii[1])
         return {
             "game": "ctf",
             "heading": None if answer.heading is None else bearing(*answer.heading),
-            "region": on_the_wire(self.map, region, self._simplify),
+            "region": self._robust_region(side, *own),
             "region_of": self.defender if side == "attacker" else self.attacker,
             "go": answer.wins if side == "attacker" else None,
             "value": float(answer.worst),
             "uncertain": answer.uncertain,
         }
+
+    def _robust_region(self, side: str, where: np.ndarray, radius: float) -> list:
+        """The opponent's region against the worst of ``side``'s own set, as
+        sent. It is there to be looked at, so it is redrawn only when the set's
+        radius grows by half a cell (rounded up, so it errs towards caution)."""
+        coarse = float(np.ceil(radius / self._region_step) * self._region_step)
+        key = (side, where[0], where[1], coarse, self.phase)
+        held = self._regions.get(side)
+        if held is None or held[0] != key:
+            other = "defender" if side == "attacker" else "attacker"
+            values = self.robust.region_values(other, self.robust.cover(side, where, coarse), self.phase)
+            rings = on_the_wire(self.map, polygon_rings(self.solved.polygons(values, other)), self._simplify)
+            held = self._regions[side] = (key, rings)
+        return held[1]
 
     def _placeable(self, p: np.ndarray) -> np.ndarray:
         """``p``, or the nearest point of the free space if a fix put it in a building or off the map."""
