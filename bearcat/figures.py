@@ -102,12 +102,13 @@ def _players(ax, attacker, defender, attacker_heading=None, defender_heading=Non
 
 
 def ctf_query_figure(
-    game_map: Map, guidance, attacker, defender, report, phase, defender_values, attacker_values, set_name
+    game_map: Map, guidance, attacker, defender, report, phase, defender_values, attacker_values, set_name, disks=None
 ):
     """What each phone shows (thesis Fig. 3.6, 3.9): on the attacker's, the
     defender positions that win against it, R_D(x_a); on the defender's, the
     attacker positions that win against it, R_A(x_d); each with its optimal
-    heading."""
+    heading. ``disks`` (radius per player) draws where each player may be,
+    for robust answers."""
     fig, (left, right) = plt.subplots(1, 2, figsize=(12.4, 6.6), layout="constrained")
     xmin, ymin, xmax, ymax = game_map.bounds
     scale = 0.08 * max(xmax - xmin, ymax - ymin)
@@ -126,6 +127,9 @@ def ctf_query_figure(
             report.defender_heading if heading == "defender" else None,
             scale,
         )
+        for who, centre, colour in (("attacker", attacker, "tab:blue"), ("defender", defender, "tab:red")):
+            if disks is not None and disks[who] > 0:
+                ax.add_patch(plt.Circle(centre, disks[who], fill=False, linestyle="--", color=colour, linewidth=1.2))
         ax.legend(loc="lower right", fontsize=8)
         ax.set_title(f"{heading}'s view: {label}")
     fig.suptitle(

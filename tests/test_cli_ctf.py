@@ -101,6 +101,30 @@ def test_query_a_blocked_return_is_the_defenders(cache, tmp_path):
     assert plot.stat().st_size > 10_000
 
 
+def test_query_robust_answers_hold_for_the_disks_the_fixes_allow(cache, tmp_path):
+    """Fresh exact fixes give the plain answer; fixes two seconds old (1 m/s
+    players) and 0.2 m off give disks of 2 + 2.448 x 0.2 m, and worst cases
+    no better for either side than the plain value."""
+    state = ("--stages", "all", "--phase", "return", "--attacker", "5,5", "--defender", "3,7")
+
+    def query(*extra):
+        run = bearcat("query", "ctf", *GAME, *state, "--robust", *extra, "--json", cache=cache)
+        assert run.returncode == 0, run.stderr
+        return json.loads(run.stdout)
+
+    fresh = query("--attacker-age", "0", "--defender-age", "0")
+    assert fresh["robust"]["attacker"]["worst_value_m"] == pytest.approx(fresh["value_m"], abs=1e-3)
+    assert fresh["robust"]["defender"]["worst_value_m"] == pytest.approx(fresh["value_m"], abs=1e-3)
+    assert not fresh["robust"]["attacker"]["uncertain"]
+    plot = tmp_path / "robust.png"
+    stale = query("--attacker-age", "2", "--defender-age", "2", "--accuracy", "0.2", "--plot", str(plot))
+    robust = stale["robust"]
+    assert robust["attacker"]["radius_m"] == pytest.approx(2 + 2.448 * 0.2, abs=1e-3)
+    assert robust["attacker"]["worst_value_m"] >= stale["value_m"] >= robust["defender"]["worst_value_m"]
+    assert robust["attacker"]["wins"] == (robust["attacker"]["worst_value_m"] <= 0)
+    assert plot.stat().st_size > 10_000
+
+
 def test_play_writes_tracks_and_a_figure(cache, tmp_path):
     plot, out = tmp_path / "play.png", tmp_path / "play.json"
     run = bearcat(

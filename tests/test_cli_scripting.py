@@ -119,14 +119,19 @@ def test_experiment_json_is_the_table(tmp_path):
 
 @pytest.mark.slow
 def test_study_json_is_the_summary(tmp_path):
-    """Slow: the fake-out study plays on field-50's 45-point game, which
+    """Slow: the holding study plays on field-50's 45-point game, which
     takes a minute or more to solve the first time."""
     out = tmp_path / "study"
-    run = bearcat("study", "fake-out", "--trials", "1", "--workers", "1", "--out", str(out), "--json")
+    words = ("study", "holding", "--trials", "1", "--netem", "ideal", "--workers", "1", "--out", str(out), "--json")
+    run = bearcat(*words)
     assert run.returncode == 0, run.stderr
     rows = json.loads(run.stdout)
     assert rows == json.loads((out / "summary.json").read_text())
-    assert {r["scenario"] for r in rows} == {"fake-out", "fake-out-aided-defender"}
+    assert {(r["guidance"], r["rate"]) for r in rows} == {
+        (g, rate) for g in ("plain", "robust", "robust, age only") for rate in (1.0, 2.0, 5.0, 10.0)
+    }
+    assert all(r["games"] == 1 and r["netem"] == "ideal" for r in rows)
+    assert (out / "holding.png").stat().st_size > 10_000
 
 
 # --- a --help that needs no solver ---

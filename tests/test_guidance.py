@@ -10,7 +10,7 @@ import shapely
 from scipy import ndimage
 
 from bearcat.agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor
-from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty
 from bearcat.agents.human.phone import Phone
 from bearcat.bus import keys
 from bearcat.bus.codec import decode, encode
@@ -155,3 +155,58 @@ def test_a_pursuit_cell_reads_as_lon_lat_ring_of_the_area_sent_as_value():
     cell = in_metres(field, ring)
     assert cell.is_valid and cell.area == pytest.approx(sent.value, rel=1e-4)
     assert cell.contains(shapely.Point(25.0, 25.0)) and not cell.contains(shapely.Point(10.0, 10.0))
+
+
+# --- robust advice: the disks stale, noisy fixes allow ---
+
+
+@pytest.fixture(scope="module")
+def ctf10_game():
+    ctf10 = load_map("ctf-10")
+    return ctf10, CtfQueries(solve_ctf(ctf_geometry(ctf10, 21), Rules(), "return", scheme="first"))
+
+
+def fix(game_map, agent, where, t, accuracy=None):
+    lat, lon = game_map.to_geodetic(*where)
+    return Fix(agent=agent, seq=1, t=t, lat=lat, lon=lon, accuracy=accuracy)
+
+
+def test_each_report_carries_the_disk_its_agent_may_be_in():
+    """Top speed x the fix's age, plus the fix's 95 % error circle (2.448
+    sigma for a two-axis Gaussian); the phone shows the same radius."""
+    field = load_map("field-50")
+    uncertainty = Uncertainty({"a": 3.0, "b": 1.0})
+    service = GuidanceService("g", field, ["a", "b"], rate=10.0, uncertainty=uncertainty)
+    service.handle("bearcat/g/fix/a", fix(field, "a", (10.0, 10.0), 0.5, accuracy=2.0), 0.5)
+    service.handle("bearcat/g/fix/b", fix(field, "b", (20.0, 10.0), 0.6), 0.6)
+    (to_a, _) = service.tick(1.5)
+    radius = {r.agent: r.radius for r in to_a.message.reports}
+    assert radius["a"] == pytest.approx(3.0 * 1.0 + 2.448 * 2.0, abs=0.01)
+    assert radius["b"] == pytest.approx(1.0 * 0.9, abs=0.01)
+    assert Uncertainty({"a": 3.0}, confidence=0.0).radius("a", 1.0, 2.0) == 3.0
+    phone = Phone("a", field, gps=GpsError(), compass=CompassError(), rng=np.random.default_rng(0))
+    phone.show(decode(encode(to_a.message), keys.guidance("g", "a")), 1.6)
+    assert phone.screen.reports["b"].radius == pytest.approx(0.9, abs=0.01)
+
+
+def test_robust_advice_is_the_plain_one_for_fresh_exact_fixes_and_cautious_for_stale_ones(ctf10_game):
+    ctf10, queries = ctf10_game
+    plain = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+    robust = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return", robust=["a", "d"])
+    fixes = LatestFixes(ctf10)
+    # A state the attacker barely wins: its value just below zero.
+    states = [((x, y), (u, v)) for x in np.linspace(1, 9, 9) for y in np.linspace(1, 9, 9) for u, v in [(2.0, 6.0)]]
+    values = [queries.evaluate(a, d, "return").value for a, d in states]
+    a, d = states[int(np.argmin([abs(v + 0.2) for v in values]))]
+    fixes.take(fix(ctf10, "a", a, 1.0))
+    fixes.take(fix(ctf10, "d", d, 1.0))
+    fresh = {agent: (plain(agent, fixes, 1.0), robust(agent, fixes, 1.0)) for agent in ("a", "d")}
+    for shown, answer in fresh.values():
+        assert answer["value"] == pytest.approx(shown["value"], abs=1e-6)
+        assert answer["heading"] == pytest.approx(shown["heading"]) and not answer["uncertain"]
+    assert fresh["a"][1]["go"] is True
+    # Two seconds later the same fixes allow the defender to be where it wins:
+    # no go, and the attacker is told the plain answer would differ.
+    stale = robust("a", fixes, 3.0)
+    assert stale["go"] is False and stale["uncertain"] and stale["value"] > fresh["a"][1]["value"]
+    assert plain("a", fixes, 3.0)["go"] is True

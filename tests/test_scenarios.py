@@ -1,10 +1,12 @@
 """Scenario files: the built-in ones load, and every mistake is one sentence
 naming the file and the key."""
 
+import re
+
 import pytest
 
 from bearcat.scenarios.schema import ScenarioError, list_scenarios, load_scenario, parse_scenario
-from tests.support.scenario_files import scenario_text
+from tests.support.scenario_files import scenario_text, write_scenario
 
 
 @pytest.mark.parametrize("name", list_scenarios())
@@ -200,3 +202,60 @@ def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():
     assert (round(low, 3), round(high, 3)) == (0.501, 0.759)  # p = 0.64, n = 50
     assert wilson(0, 10)[0] == 0.0 and wilson(10, 10)[1] == 1.0
     assert wilson(0, 10)[1] == pytest.approx(0.2775, abs=1e-4)
+
+
+# --- variants: one cell of a study ---
+
+
+def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect():
+    from bearcat.scenarios.schema import parse_scenario
+    from bearcat.scenarios.variants import vary
+
+    base = load_scenario("fake-out")
+    changed = vary(
+        base,
+        {
+            "guidance.robust": True,
+            "agent.*.fix_rate": 5.0,
+            "agent.defender.reaction": 1.2,
+            "agent.defender.options.standoff": 3.0,
+        },
+    )
+    assert changed.robust_guidance and not base.robust_guidance
+    assert [a.fix_rate for a in changed.agents] == [5.0, 5.0]
+    assert changed.agent("defender").reaction == 1.2
+    assert changed.agent("attacker").reaction == base.agent("attacker").reaction
+    assert changed.agent("defender").options.standoff == 3.0
+    assert changed.agent("defender").options.lead == base.agent("defender").options.lead
+    # Its TOML is what a peer fetching it gets: it reads back as the same scenario.
+    again = parse_scenario(changed.text, game_map=changed.map)
+    assert again.agents == changed.agents and again.robust_guidance
+    assert "with guidance.robust = True" in changed.source
+
+
+@pytest.mark.parametrize(
+    "changes, message",
+    [
+        ({"agent.nobody.reaction": 1.0}, "there is no agent 'nobody'; the ids are attacker, defender"),
+        ({"robust": True}, "names no key"),
+        ({"agent.defender.reaction": -1.0}, "agent[1].reaction"),
+        ({"guidance.confidence": 1.0}, "guidance.confidence"),
+    ],
+)
+def test_a_bad_change_is_refused_in_one_sentence_naming_the_key(changes, message):
+    from bearcat.scenarios.variants import vary
+
+    with pytest.raises(ScenarioError, match=re.escape(message)) as caught:
+        vary(load_scenario("fake-out"), changes)
+    assert "\n" not in str(caught.value)
+
+
+def test_new_scenarios_get_robust_guidance_and_the_thesis_reproductions_keep_it_off(tmp_path):
+    path = write_scenario(tmp_path)
+    assert load_scenario(path).robust_guidance is True
+    for name in ("fake-out", "fake-out-aided-defender", "go-no-go", "search", "open-loop", "small-area"):
+        assert load_scenario(name).robust_guidance is False, name
+    from bearcat.scenarios.variants import vary
+
+    one = vary(load_scenario("fake-out"), {"agent.defender.robust": True})
+    assert [one.robust(a) for a in one.agents] == [False, True]

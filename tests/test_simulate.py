@@ -295,3 +295,22 @@ def test_over_tcp_no_fix_is_lost_but_some_arrive_late_in_bursts(tmp_path):
     assert late and min(e["delay"] for e in late) > 0.5
     arrivals = sorted(e["t"] + e["delay"] for e in fixes)
     assert sum(b - a < 0.002 for a, b in itertools.pairwise(arrivals)) > len(late)  # what waited came with it
+
+
+def test_robust_guidance_sends_each_report_s_disk_and_the_recording_draws_them(tmp_path):
+    """Each report's radius is at least the distance its agent could walk
+    since the fix (3 m/s), the robust answers say when the plain one would
+    differ, and the recording has the disks on the phone and beside the truth."""
+    from bearcat.cli import main
+
+    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, robust=True)
+    assert main(["simulate", str(path), "--seed", "4", "--out", str(tmp_path / "out")]) == 0
+    run = tmp_path / "out" / "seed-4"
+    guidance = [
+        e["message"] for e in read_events(run / "events.jsonl") if e.get("message", {}).get("type") == "guidance"
+    ]
+    reports = [(m["t"], r) for m in guidance for r in m["reports"]]
+    assert reports and all(r["radius"] >= 3.0 * (t - r["t"]) - 0.01 for t, r in reports)
+    assert any(m.get("uncertain") for m in guidance)
+    recording = (run / "recording.rrd").read_bytes()
+    assert b"ground/uncertainty/attacker" in recording and b"phone/defender/disks" in recording

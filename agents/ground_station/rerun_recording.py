@@ -4,11 +4,14 @@ saw and what each phone showed, on one time line.
 - ``map``: the area, buildings and game regions (static);
 - ``ground/truth/AGENT``: where each agent really was (simulation only);
 - ``ground/fix/AGENT``: each agent as its fixes reported it, beside the truth;
+- ``ground/uncertainty/AGENT``: the disk the guidance put round each
+  agent's last report (where it may be by then), over the truth;
 - ``ground/uav/UAV``: each UAV's search target and its detections;
 - ``phone/AGENT/...``: that phone's screen as of the guidance it had
   received: the opponent's winning region, the heading ring's arrow, the
-  agents as last reported, where an unseen opponent may be (P_D) and an
-  alert when a UAV saw this agent;
+  agents as last reported with their disks and the reports' ages, where an
+  unseen opponent may be (P_D), an alert when a UAV saw this agent, and a
+  note when the advice is uncertain (the robust and the plain answers differ);
 - ``game``: the referee's states as a text log, and the solver's value
   shown to each phone as a plot.
 
@@ -283,12 +286,22 @@ def _log_screen(rec, rr, m, to_local, markers: _Markers) -> None:
         )
     if m.get("seen_by"):
         rec.log(f"{base}/alert", rr.TextLog(f"{agent} seen by {', '.join(m['seen_by'])}"))
+    if m.get("uncertain"):
+        rec.log(f"{base}/alert", rr.TextLog(f"{agent}: uncertain, the answer at the reports would differ"))
     reports = m.get("reports", [])
     if reports:
         points = [to_local(r["lat"], r["lon"]) for r in reports]
         drawn = markers.draw([(r["agent"], p) for r, p in zip(reports, points)])
         for shape, archetype in drawn.items():
             rec.log(f"{base}/agents/{shape}s", archetype)
+        others = [(r, p) for r, p in zip(reports, points) if r["agent"] != agent and r.get("radius")]
+        if others:
+            disks = [_disk(p, r["radius"]) for r, p in others]
+            colours = [markers.colour(r["agent"]) for r, _ in others]
+            ages = [f"{r['agent']} {max(m['t'] - r['t'], 0.0):.1f} s ago" for r, _ in others]
+            rec.log(f"{base}/disks", rr.LineStrips2D(disks, colors=colours, labels=ages))
+            for (r, _), ring, colour in zip(others, disks, colours):
+                rec.log(f"ground/uncertainty/{r['agent']}", rr.LineStrips2D([ring], colors=[colour]))
         me = next((p for p, r in zip(points, reports) if r["agent"] == agent), None)
         if me is not None and m.get("heading") is not None:
             b = np.radians(m["heading"])
@@ -296,6 +309,12 @@ def _log_screen(rec, rr, m, to_local, markers: _Markers) -> None:
             rec.log(f"{base}/heading", rr.Arrows2D(origins=[me], vectors=[arrow], colors=[markers.colour(agent)]))
     if m.get("value") is not None:
         rec.log(f"game/value/{agent}", rr.Scalars(m["value"]))
+
+
+def _disk(centre, radius: float, sides: int = 48) -> np.ndarray:
+    """A circle as a closed line of ``sides`` segments."""
+    angles = np.linspace(0.0, 2 * np.pi, sides + 1)
+    return np.asarray(centre) + radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
 
 
 def _state_line(state: dict) -> str:

@@ -228,11 +228,16 @@ class UavTasker:
             self._sweeps[u.name][1] = index = (index + 1) % len(path)
         return tuple(float(v) for v in path[index])
 
-    def worst_case(self, attacker) -> tuple[float, float] | None:
+    def worst_case(self, attacker, values=None) -> tuple[float, float] | None:
         """The place in P_D where the defender would do best against an
-        attacker at ``attacker`` (None if P_D is empty or there is no solution)."""
+        attacker at ``attacker``, or given the defender's ``values`` on the
+        solver's grid (the worst over where the attacker may be); None if
+        P_D is empty or there is no solution."""
         possible = self.picture.possible
-        values = self._defender_values(self._placeable(np.asarray(attacker, float)))
+        if values is None:
+            values = self._defender_values(self._placeable(np.asarray(attacker, float)))
+        else:
+            values = self._resampled(values)
         if possible is None or values is None or not possible.any():
             return None
         masked = np.where(possible, values, -np.inf)
@@ -253,5 +258,9 @@ class UavTasker:
             values = self.ctf.defender_region_values(attacker, self._phase)
         except InputError:  # the attacker's fix is off the solver's grid or in a building
             return None
+        return self._resampled(values)
+
+    def _resampled(self, values: np.ndarray) -> np.ndarray:
+        """A field on the solver's player grid, on the search grid."""
         sample = RegularGridInterpolator(self.ctf.geometry.grid.axes(), values, bounds_error=False, fill_value=-1.0)
         return sample(self._nodes)

@@ -27,7 +27,7 @@ from bearcat.output import Output, add_json_option
 from bearcat.progress import solve_bars
 from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
 from bearcat.solvers.ctf_playout import play
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf_queries import CtfQueries, StateReport
 from bearcat.solvers.hji import SCHEMES
 from bearcat.writing import writing
 
@@ -131,6 +131,40 @@ def register(subparsers) -> None:
         help="capture: the attacker has not taken the flag; return: it has (default: the first stage solved)",
     )
     q.add_argument("--plot", type=Path, metavar="PNG", help="draw the state and both players' opponent regions")
+    robust = q.add_argument_group(
+        "robust answers",
+        "with --robust, each position is a fix: the player is anywhere within its top speed x the fix's age "
+        "plus the fix's error radius at the confidence, and the answers hold against all of it",
+    )
+    robust.add_argument("--robust", action="store_true", help="answer for the sets the fixes allow, worst case")
+    robust.add_argument(
+        "--attacker-age",
+        type=arguments.non_negative,
+        default=1.0,
+        metavar="S",
+        help="age of the attacker's fix (default 1)",
+    )
+    robust.add_argument(
+        "--defender-age",
+        type=arguments.non_negative,
+        default=1.0,
+        metavar="S",
+        help="age of the defender's fix (default 1)",
+    )
+    robust.add_argument(
+        "--accuracy",
+        type=arguments.non_negative,
+        default=0.0,
+        metavar="M",
+        help="both fixes' GPS error, metres per axis at 1 sigma, as phones report it (default 0)",
+    )
+    robust.add_argument(
+        "--confidence",
+        type=_confidence,
+        default=0.95,
+        metavar="P",
+        help="the share of the GPS error circle guarded against, in [0, 1) (default 0.95)",
+    )
     add_json_option(q, "the answer")
     q.set_defaults(run=run_query)
 
@@ -147,6 +181,13 @@ def register(subparsers) -> None:
     p.add_argument("--plot", type=Path, metavar="PNG", help="draw the start's winning region and both tracks")
     add_json_option(p, "the tracks and outcome")
     p.set_defaults(run=run_play)
+
+
+def _confidence(text: str) -> float:
+    value = arguments.non_negative(text)
+    if value >= 1.0:
+        raise argparse.ArgumentTypeError(f"{text!r} is not below 1: no circle holds a Gaussian error for certain")
+    return value
 
 
 def _add_state_options(parser) -> None:
@@ -263,8 +304,14 @@ def run_query(args) -> int:
     guidance = CtfQueries(solved.solution)
     phase = args.phase or ("return" if args.stages == "return" else "capture")
     report = guidance.evaluate(args.attacker, args.defender, phase)
-    defender_values = guidance.defender_region_values(args.attacker, phase)
-    attacker_values = guidance.attacker_region_values(args.defender, phase)
+    if args.robust:
+        robust = robust_answers(args, game, guidance, phase)
+        report = StateReport(report.value, robust["attacker"].heading, robust["defender"].heading)
+        defender_values = robust["defender_region"]
+        attacker_values = robust["attacker_region"]
+    else:
+        defender_values = guidance.defender_region_values(args.attacker, phase)
+        attacker_values = guidance.attacker_region_values(args.defender, phase)
     defender_polygons = guidance.polygons(defender_values, "defender")
     attacker_polygons = guidance.polygons(attacker_values, "attacker")
     name = SET_NAMES[guidance.value_set(phase).name]
@@ -285,13 +332,23 @@ def run_query(args) -> int:
         f"{report.winner} wins ({name}, {phase} phase): value {report.value:+.3f} m "
         f"({'attacker margin' if report.value <= 0 else 'defender margin'} {abs(report.value):.3f} m)"
     )
+    if args.robust:
+        answer["robust"] = _robust_json(robust)
+        for side, verdict in (("attacker", "go"), ("defender", "winning")):
+            a = robust[side]
+            out.say(
+                f"robust, {side}'s display (the set of radius {robust['radii'][side]:.2f} m round each fix): "
+                f"worst case {a.worst:+.3f} m, {verdict if a.wins else 'no ' + verdict}"
+                + (" - uncertain: the plain answer differs" if a.uncertain else "")
+            )
     for who in ("attacker", "defender"):
         h = answer[f"{who}_heading"]
         text = "none (the value is flat here)" if h is None else f"{h['bearing_deg']:.1f} deg from north"
-        out.say(f"{who} optimal heading: {text}")
+        out.say(f"{who} {'robust' if args.robust else 'optimal'} heading: {text}")
     out.say(
         f"defender's winning region for this attacker position: {answer['defender_region_area_m2']:.1f} m^2; "
         f"attacker's for this defender position: {answer['attacker_region_area_m2']:.1f} m^2"
+        + (" (robust: where that side may win against some position in the other's set)" if args.robust else "")
     )
     if out.wants_json:
         answer["regions"] = {
@@ -302,11 +359,57 @@ def run_query(args) -> int:
     if args.plot is not None:
         from bearcat.figures import ctf_query_figure
 
+        disks = robust["radii"] if args.robust else None
         fig = ctf_query_figure(
-            game.map, guidance, args.attacker, args.defender, report, phase, defender_values, attacker_values, name
+            game.map,
+            guidance,
+            args.attacker,
+            args.defender,
+            report,
+            phase,
+            defender_values,
+            attacker_values,
+            name,
+            disks=disks,
         )
         out.figure(fig, args.plot, dpi=110)
     return 0
+
+
+def robust_answers(args, game: CtfGame, guidance: CtfQueries, phase: str) -> dict:
+    """Both displays' robust answers and regions for the fixes the options describe."""
+    from bearcat.agents.ground_station.guidance.fixes import Uncertainty
+    from bearcat.solvers.ctf_robust import RobustCtf
+
+    rules = game.rules
+    uncertainty = Uncertainty({"attacker": rules.attacker_speed, "defender": rules.defender_speed}, args.confidence)
+    radii = {
+        "attacker": uncertainty.radius("attacker", args.attacker_age, args.accuracy),
+        "defender": uncertainty.radius("defender", args.defender_age, args.accuracy),
+    }
+    robust = RobustCtf(guidance)
+    attacker = robust.cover("attacker", args.attacker, radii["attacker"])
+    defender = robust.cover("defender", args.defender, radii["defender"])
+    return {
+        "radii": radii,
+        "attacker": robust.answer("attacker", attacker, defender, phase),
+        "defender": robust.answer("defender", attacker, defender, phase),
+        "defender_region": robust.region_values("defender", attacker, phase),
+        "attacker_region": robust.region_values("attacker", defender, phase),
+    }
+
+
+def _robust_json(robust: dict) -> dict:
+    return {
+        side: {
+            "radius_m": round(robust["radii"][side], 3),
+            "worst_value_m": round(robust[side].worst, 4),
+            "wins": robust[side].wins,
+            "uncertain": robust[side].uncertain,
+            "heading": _heading_json(robust[side].heading),
+        }
+        for side in ("attacker", "defender")
+    }
 
 
 def run_play(args) -> int:

@@ -78,11 +78,13 @@ def run(args) -> int:
             from bearcat.scenarios.human_trials import play_human_trials
 
             play_human_trials(out, args.human, args.trials, args.seed, say=report.say)
-            results = read_results(out / "results.jsonl")
+            results = read_results(out / "results.jsonl")  # the models' games beside the person's
         else:
             tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
             with counting(len(tasks), args.study, "game") as finished:
                 results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=finished)
+            wanted = {t["key"] for t in tasks}
+            results = {k: r for k, r in results.items() if k in wanted}
         rows = summary_rows(args.study, results.values())
         (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
     report.say(TABLES[args.study](rows))

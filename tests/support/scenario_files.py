@@ -1,5 +1,6 @@
 """A small capture-the-flag scenario for the field-simulator tests: the
-fake-out setup of thesis 3.5.1 on a 21 x 21 grid, which solves in seconds."""
+fake-out setup of thesis 3.5.1 on a 21 x 21 grid, which solves in seconds,
+with the thesis's guidance (answers at the reports) unless ``robust``."""
 
 SCENARIO = """
 [scenario]
@@ -15,6 +16,9 @@ capture_radius = 2.5
 stages = "return"
 grid = 21
 return_time = 60.0
+
+[guidance]
+robust = {robust}
 
 [[agent]]
 id = "attacker"
@@ -44,6 +48,7 @@ def scenario_text(
     attacker_behaviour="fake-out",
     defender_behaviour="direct",
     defender_aided=False,
+    robust=False,
 ) -> str:
     return SCENARIO.format(
         name=name,
@@ -54,6 +59,7 @@ def scenario_text(
         attacker_behaviour=attacker_behaviour,
         defender_behaviour=defender_behaviour,
         defender_aided=str(defender_aided).lower(),
+        robust=str(robust).lower(),
     )
 
 

@@ -75,21 +75,22 @@ class CtfAdvisor:
         return held[1]
 
     def radii(self, fixes: LatestFixes, now: float) -> tuple[float, float]:
-        """The attacker's and the defender's uncertainty radii, rounded up to ``RADIUS_STEP``."""
-        out = []
-        for player in (self.attacker, self.defender):
-            _, t, fix = fixes.latest[player]
-            r = self.uncertainty.radius(player, now - t, fix)
-            out.append(float(np.ceil(r / RADIUS_STEP) * RADIUS_STEP))
-        return tuple(out)
+        """The attacker's and the defender's uncertainty radii."""
+        return self.radius(self.attacker, fixes, now), self.radius(self.defender, fixes, now)
+
+    def radius(self, player: str, fixes: LatestFixes, now: float) -> float:
+        """Where ``player`` may be by ``now``, from its latest fix, rounded up to ``RADIUS_STEP``."""
+        _, t, fix = fixes.latest[player]
+        r = self.uncertainty.radius(player, now - t, fix.accuracy)
+        return float(np.ceil(r / RADIUS_STEP) * RADIUS_STEP)
 
     def answer_at(self, agent: str, a: np.ndarray, d: np.ndarray, radii=None) -> dict:
         """The CTF fields of ``agent``'s guidance with the attacker at ``a`` and
         the defender at ``d`` (map metres; moved out of buildings first);
         with ``radii``, robust against the disks of those radii round them."""
         try:
-            a = self._placeable(a)
-            d = self._placeable(d)
+            a = self.placeable(a)
+            d = self.placeable(d)
             if radii is not None:
                 return self._robust_answer(agent, a, d, radii)
             report = self.solved.evaluate(a, d, self.phase)
@@ -135,11 +136,15 @@ class CtfAdvisor:
             "uncertain": answer.uncertain,
         }
 
+    def coarse(self, radius: float) -> float:
+        """``radius`` rounded up to half a cell: for what is redrawn only when a set grows by that much."""
+        return float(np.ceil(radius / self._region_step) * self._region_step)
+
     def _robust_region(self, side: str, where: np.ndarray, radius: float) -> list:
         """The opponent's region against the worst of ``side``'s own set, as
         sent. It is there to be looked at, so it is redrawn only when the set's
         radius grows by half a cell (rounded up, so it errs towards caution)."""
-        coarse = float(np.ceil(radius / self._region_step) * self._region_step)
+        coarse = self.coarse(radius)
         key = (side, where[0], where[1], coarse, self.phase)
         held = self._regions.get(side)
         if held is None or held[0] != key:
@@ -149,7 +154,7 @@ class CtfAdvisor:
             held = self._regions[side] = (key, rings)
         return held[1]
 
-    def _placeable(self, p: np.ndarray) -> np.ndarray:
+    def placeable(self, p: np.ndarray) -> np.ndarray:
         """``p``, or the nearest point of the free space if a fix put it in a building or off the map."""
         if self.solved.geometry.grid.contains(p) and not self.solved.blocked_at(p):
             return p

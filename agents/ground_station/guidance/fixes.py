@@ -39,12 +39,13 @@ class Uncertainty:
     speeds: dict
     confidence: float = DEFAULT_CONFIDENCE
 
-    def radius(self, agent: str, age: float, fix: Fix) -> float | None:
-        """None for an agent whose top speed is not known."""
+    def radius(self, agent: str, age: float, sigma: float | None) -> float | None:
+        """The radius for ``agent``'s fix of ``age`` seconds and per-axis error
+        ``sigma`` (a fix's ``accuracy``); None for an agent whose top speed is not known."""
         speed = self.speeds.get(agent)
         if speed is None:
             return None
-        return max(float(age), 0.0) * float(speed) + error_radius(fix.accuracy, self.confidence)
+        return max(float(age), 0.0) * float(speed) + error_radius(sigma, self.confidence)
 
 
 class LatestFixes:
@@ -66,7 +67,7 @@ class LatestFixes:
         """Every agent as last reported, with the radius it may be in by ``now`` where ``uncertainty`` knows it."""
         out = []
         for agent, (_, t, f) in self.latest.items():
-            radius = None if uncertainty is None else uncertainty.radius(agent, now - t, f)
+            radius = None if uncertainty is None else uncertainty.radius(agent, now - t, f.accuracy)
             out.append(Report(agent, f.t, f.lat, f.lon, radius=None if radius is None else round(min(radius, 1e7), 2)))
         return out
 

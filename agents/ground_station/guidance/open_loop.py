@@ -78,7 +78,7 @@ class ReachAvoidAdvisor:
 
     def _radius(self, held, defender: str, now: float) -> float:
         _, t, fix = held
-        return self.uncertainty.radius(defender, now - t, fix)
+        return self.uncertainty.radius(defender, now - t, fix.accuracy)
 
     def _answer(self, points, grown) -> dict:
         a, *others = (self._placeable(p) for p in points)

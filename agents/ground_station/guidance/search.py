@@ -8,6 +8,7 @@ from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes
 from bearcat.agents.ground_station.guidance.outlines import mask_rings, on_the_wire
 from bearcat.bus.messages import GameState
+from bearcat.solvers.errors import InputError
 
 
 class SearchAdvisor:
@@ -16,8 +17,9 @@ class SearchAdvisor:
     and the answer against the worst of those places: the value is the
     largest over P_D, so "go" means the attacker wins wherever the defender
     is, seen or not (``worst_case``). P_D grows with the time since the
-    defender was last seen, so a stale sighting counts for what it is
-    worth."""
+    defender's last sighting was taken, so a stale sighting counts for what
+    it is worth; with robust guidance the answer also holds wherever the
+    attacker may be since its own last fix."""
 
     def __init__(self, ctf: CtfAdvisor, tasker, side) -> None:
         self.ctf = ctf
@@ -34,20 +36,33 @@ class SearchAdvisor:
         if agent in self.side:
             fields["possible"] = self._possible()
             if self.ctf.attacker in fixes.latest:
-                fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0]))
+                robust = agent in self.ctf.robust_for
+                # The worst of P_D is looked for again when the attacker's set grows by half a cell.
+                radius = self.ctf.coarse(self.ctf.radius(self.ctf.attacker, fixes, now)) if robust else None
+                fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0], radius))
         return fields
 
-    def _against_the_worst(self, agent: str, a: np.ndarray) -> dict:
-        key = (agent, a[0], a[1], self.tasker.picture.updates, self.ctf.phase)
+    def _against_the_worst(self, agent: str, a: np.ndarray, radius: float | None) -> dict:
+        key = (agent, a[0], a[1], radius, self.tasker.picture.updates, self.ctf.phase)
         if self._worst[0] != key:
-            worst = self.tasker.worst_case(a)
             answer = None
+            try:
+                values = None if radius is None else self._defender_values(a, radius)
+            except InputError:
+                values = None
+            worst = self.tasker.worst_case(a, values)
             if worst is not None:
-                answer = self.ctf.answer_at(agent, a, np.asarray(worst))
+                radii = None if radius is None else (radius, 0.0)
+                answer = self.ctf.answer_at(agent, a, np.asarray(worst), radii)
                 answer = {k: answer[k] for k in ("heading", "value", "go") if k in answer}
                 answer["worst_case"] = "value" in answer
             self._worst = (key, answer)
         return self._worst[1] or {}
+
+    def _defender_values(self, a: np.ndarray, radius: float) -> np.ndarray:
+        """Over defender positions, the value against the worst of where the attacker may be."""
+        robust = self.ctf.robust
+        return robust.region_values("defender", robust.cover("attacker", self.ctf.placeable(a), radius), self.ctf.phase)
 
     def _possible(self) -> list:
         """P_D's outlines, redrawn only when the tasker updated it (once a second)."""
