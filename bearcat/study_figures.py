@@ -87,12 +87,17 @@ def fake_out_figure(rows):
     """One heatmap per report rate: the attacker's win rate against the
     unaided defender by marking distance (rows) and reaction time (columns),
     the robust aided defender as the bottom row."""
-    rates = sorted({r["rate"] for r in rows})
+    people = [r for r in rows if r["defender"] == "human"]
+    rows = [r for r in rows if r["defender"] != "human"]
+    rates = sorted({r["rate"] for r in rows}) or [None]
     reactions = sorted({r["reaction"] for r in rows})
     fig, axes = plt.subplots(1, len(rates), figsize=(5.6 * len(rates), 4.6), squeeze=False)
     image = None
     for ax, rate in zip(axes[0], rates):
         at_rate = [r for r in rows if r["rate"] == rate]
+        if not at_rate:
+            ax.axis("off")
+            continue
         kinds = list(dict.fromkeys((r["defender"], r["marking"]) for r in at_rate))
         kinds.sort(key=lambda k: (k[1] is None, k[1] or 0))
         grid = np.full((len(kinds), len(reactions)), np.nan)
@@ -106,8 +111,16 @@ def fake_out_figure(rows):
         ax.set_yticks(range(len(kinds)), [f"marks {m:g} m" if m is not None else d for d, m in kinds])
         ax.set_xlabel("defender's reaction time (s)")
         ax.set_title(f"phones report at {rate:g} Hz")
-    fig.colorbar(image, ax=axes[0].tolist(), label="attacker wins (%)")
-    fig.suptitle("the fake-out: attacker wins against the unaided defender, and the robust aided one")
+    if image is not None:
+        fig.colorbar(image, ax=axes[0].tolist(), label="attacker wins (%)")
+    title = "the fake-out: attacker wins against the unaided defender, and the robust aided one"
+    for r in people:
+        low, high = (100 * v for v in r["attacker_win_interval"])
+        title += (
+            f"\na person as the defender ({r['games']} games, phones at {r['rate']:g} Hz): "
+            f"attacker wins {100 * r['attacker_win_rate']:.0f}% ({low:.0f}-{high:.0f})"
+        )
+    fig.suptitle(title)
     return fig
 
 

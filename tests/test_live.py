@@ -321,3 +321,47 @@ def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):
     assert x1 - x0 > 4.0 and abs(y1 - y0) < 0.4 * (x1 - x0)
     assert abs(x2 - xs) < 0.3 and abs(y2 - ys) < 0.3
     assert y3 - y2 > 4.0 and abs(x3 - x2) < 0.4 * (y3 - y2)
+
+
+@pytest.mark.slow  # solves the fake-out's 45^4 game unless an earlier test did
+def test_a_person_plays_the_fake_out_defender_and_the_game_joins_the_study(tmp_path, env):
+    """``bearcat study fake-out --human defender`` prints the keyboard peer's
+    command, plays the game live with the person's keys (here: walk south,
+    out of the attacker's way) and appends it to the study's results under
+    the defender "human", where the table shows it."""
+    import pty
+
+    out = tmp_path / "study"
+    study = subprocess.Popen(
+        [sys.executable, "-m", "bearcat", "study", "fake-out", "--human", "defender", "--trials", "1", "--out", out],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    person = None
+    try:
+        command, printed = None, []
+        for line in study.stdout:
+            printed.append(line)
+            if "bearcat peer walker" in line:
+                command = line.split()
+                break
+        assert command is not None, "".join(printed)
+        master, slave = pty.openpty()
+        person = subprocess.Popen(command, stdin=slave, stdout=slave, stderr=slave, env=env, close_fds=True)
+        os.close(slave)
+        assert wait_for(lambda: game_started(out / "human" / "seed-0"), 120), "the game never started"
+        os.write(master, b"s")
+        rest, _ = study.communicate(timeout=120)
+        person.wait(timeout=30)
+        os.close(master)
+    finally:
+        for p in (study, person):
+            if p is not None and p.poll() is None:
+                p.kill()
+    assert study.returncode == 0, rest
+    (row,) = [json.loads(line) for line in (out / "results.jsonl").read_text().splitlines()]
+    assert row["labels"]["defender"] == "human" and row["winner"] in ("attacker", "defender") and row["seed"] == 0
+    assert "a person as the defender, phones at 1 Hz: attacker wins" in rest and (out / "fake-out.png").exists()
+    assert (out / "human" / "seed-0" / "events.jsonl").exists()

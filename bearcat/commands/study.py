@@ -153,6 +153,8 @@ def _holding_table(rows) -> str:
 
 
 def _fake_out_table(rows) -> str:
+    people = [r for r in rows if r["defender"] == "human"]
+    rows = [r for r in rows if r["defender"] != "human"]
     reactions = sorted({r["reaction"] for r in rows})
     lines = ["attacker wins (95% interval) by the defender's reaction time (s)"]
     for rate in sorted({r["rate"] for r in rows}):
@@ -162,12 +164,14 @@ def _fake_out_table(rows) -> str:
         for defender, marking in dict.fromkeys((r["defender"], r["marking"]) for r in at_rate):
             name = defender if marking is None else f"{defender}, marks {marking:g} m"
             line = f"{name:<26}"
+            mine = {r["reaction"]: r for r in at_rate if (r["defender"], r["marking"]) == (defender, marking)}
             for t in reactions:
-                r = next(
-                    (r for r in at_rate if (r["defender"], r["marking"], r["reaction"]) == (defender, marking, t)), None
-                )
+                r = mine.get(t)
                 line += f"{'-' if r is None else _rate(r['attacker_wins'], r['games'], r['attacker_win_interval']):>20}"
             lines.append(line)
+    for r in people:
+        won = _rate(r["attacker_wins"], r["games"], r["attacker_win_interval"])
+        lines.append(f"a person as the defender, phones at {r['rate']:g} Hz: attacker wins {won}")
     return "\n".join(lines)
 
 
