@@ -331,6 +331,7 @@ def test_a_person_plays_the_fake_out_defender_and_the_game_joins_the_study(tmp_p
     the defender "human", where the table shows it."""
     import pty
 
+    env = dict(env, BEARCAT_CACHE_DIR=os.environ["BEARCAT_CACHE_DIR"])  # the session's: its 45^4 solve is shared
     out = tmp_path / "study"
     study = subprocess.Popen(
         [sys.executable, "-m", "bearcat", "study", "fake-out", "--human", "defender", "--trials", "1", "--out", out],
