@@ -201,17 +201,7 @@ class _CtfGame:
         )
         if s.uavs:
             advisor = SearchAdvisor(advisor, self.tasker(), self.sight.side("attacker"))
-        limited = self.sight.line_of_sight
-        return GuidanceService(
-            s.name,
-            s.map,
-            s.ids,
-            advisor=advisor,
-            aided={a.id: a.aided for a in s.agents},
-            rate=s.guidance_rate,
-            sight=self.sight if limited or s.uavs else None,
-            uncertainty=_uncertainty(s),
-        )
+        return _service(s, advisor, sight=self.sight if self.sight.line_of_sight or s.uavs else None)
 
     def tasker(self) -> UavTasker:
         """The tasking of the attacking side's UAVs (thesis 6.2 searches for
@@ -305,15 +295,7 @@ class _PursuitGame:
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
         advisor = PursuitAdvisor(s.map, evader=self.evader.id, pursuers=[p.id for p in self.pursuers])
-        return GuidanceService(
-            s.name,
-            s.map,
-            s.ids,
-            advisor=advisor,
-            aided={a.id: a.aided for a in s.agents},
-            rate=s.guidance_rate,
-            uncertainty=_uncertainty(s),
-        )
+        return _service(s, advisor)
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:
@@ -367,15 +349,7 @@ class _ReachAvoidGame:
             robust=s.robust(self.attacker),
             uncertainty=_uncertainty(s),
         )
-        return GuidanceService(
-            s.name,
-            s.map,
-            s.ids,
-            advisor=advisor,
-            aided={a.id: a.aided for a in s.agents},
-            rate=s.guidance_rate,
-            uncertainty=_uncertainty(s),
-        )
+        return _service(s, advisor)
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:
@@ -383,6 +357,20 @@ class _ReachAvoidGame:
         opponents = tuple(d.id for d in self.defenders) if spec.team == "attacker" else (self.attacker.id,)
         situation = behaviours.Situation(spec.id, spec.team, opponents, self.goals["capture"], None, self._navigator)
         return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture")
+
+
+def _service(scenario: Scenario, advisor, sight=None) -> GuidanceService:
+    """The guidance service of ``scenario`` with ``advisor`` for its aided agents."""
+    return GuidanceService(
+        scenario.name,
+        scenario.map,
+        scenario.ids,
+        advisor=advisor,
+        aided={a.id: a.aided for a in scenario.agents},
+        rate=scenario.guidance_rate,
+        sight=sight,
+        uncertainty=_uncertainty(scenario),
+    )
 
 
 def _uncertainty(scenario: Scenario) -> Uncertainty:

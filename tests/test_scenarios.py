@@ -6,7 +6,7 @@ import re
 import pytest
 
 from bearcat.scenarios.schema import ScenarioError, list_scenarios, load_scenario, parse_scenario
-from tests.support.scenario_files import scenario_text, write_scenario
+from tests.support.scenario_files import scenario_text
 
 
 @pytest.mark.parametrize("name", list_scenarios())
@@ -75,7 +75,7 @@ def test_a_mistake_names_the_file_and_the_key(change, culprit):
         (("speed = 3.0", "speed = 1e300"), "agent[0].speed: must be a number in (0, 15] m/s, got 1e+300"),
         # Once a hang of simulate.
         (
-            ("[rules]", "[guidance]\nrate = 1e9\n[rules]"),
+            ("[guidance]\n", "[guidance]\nrate = 1e9\n"),
             "guidance.rate: must be a number in [0.01, 50] Hz, got 1000000000.0",
         ),
         # Once a TypeError.
@@ -251,8 +251,9 @@ def test_a_bad_change_is_refused_in_one_sentence_naming_the_key(changes, message
 
 
 def test_new_scenarios_get_robust_guidance_and_the_thesis_reproductions_keep_it_off(tmp_path):
-    path = write_scenario(tmp_path)
-    assert load_scenario(path).robust_guidance is True
+    path = tmp_path / "new.toml"
+    path.write_text(scenario_text().replace("[guidance]\nrobust = false\n", ""))
+    assert "[guidance]" not in path.read_text() and load_scenario(path).robust_guidance is True
     for name in ("fake-out", "fake-out-aided-defender", "go-no-go", "search", "open-loop", "small-area"):
         assert load_scenario(name).robust_guidance is False, name
     from bearcat.scenarios.variants import vary

@@ -137,20 +137,14 @@ def register(subparsers) -> None:
         "plus the fix's error radius at the confidence, and the answers hold against all of it",
     )
     robust.add_argument("--robust", action="store_true", help="answer for the sets the fixes allow, worst case")
-    robust.add_argument(
-        "--attacker-age",
-        type=arguments.non_negative,
-        default=1.0,
-        metavar="S",
-        help="age of the attacker's fix (default 1)",
-    )
-    robust.add_argument(
-        "--defender-age",
-        type=arguments.non_negative,
-        default=1.0,
-        metavar="S",
-        help="age of the defender's fix (default 1)",
-    )
+    for who in ("attacker", "defender"):
+        robust.add_argument(
+            f"--{who}-age",
+            type=arguments.non_negative,
+            default=1.0,
+            metavar="S",
+            help=f"seconds since the {who}'s fix was taken (default 1)",
+        )
     robust.add_argument(
         "--accuracy",
         type=arguments.non_negative,
