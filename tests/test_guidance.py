@@ -210,3 +210,22 @@ def test_robust_advice_is_the_plain_one_for_fresh_exact_fixes_and_cautious_for_s
     stale = robust("a", fixes, 3.0)
     assert stale["go"] is False and stale["uncertain"] and stale["value"] > fresh["a"][1]["value"]
     assert plain("a", fixes, 3.0)["go"] is True
+
+
+def test_robust_open_loop_guidance_grows_each_defenders_capture_disk_by_its_uncertainty():
+    """Fresh exact fixes give the plain answer; a defender fix grown stale
+    (a 10 m/s defender whose fix is 11 s old may be 110 m away) cuts the safe
+    path the plain answer still shows, and the attacker is told so."""
+    campus = load_map("campus-400")
+    speeds = {"a": 5.0, "d1": 1.0, "d2": 0.5}
+    common = dict(attacker="a", defenders=["d1", "d2"], targets=["flag", "home"], capture_radius=2.0, spacing=2.0)
+    plain = ReachAvoidAdvisor(campus, speeds=speeds, **common)
+    robust = ReachAvoidAdvisor(
+        campus, speeds=speeds, robust=True, uncertainty=Uncertainty({"a": 5.0, "d1": 10.0, "d2": 10.0}), **common
+    )
+    fixes = fixes_at(campus, {"a": (370.0, 30.0), "d1": (120.0, 150.0), "d2": (330.0, 200.0)})
+    fresh = robust("a", fixes, 1.02)
+    assert fresh["go"] is plain("a", fixes, 1.02)["go"] is True and not fresh["uncertain"]
+    stale = robust("a", fixes, 12.0)
+    assert plain("a", fixes, 12.0)["go"] is True
+    assert stale["go"] is False and stale["uncertain"]
