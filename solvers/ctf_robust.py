@@ -19,8 +19,8 @@ How the extreme is found, exactly rather than by sampling: the value is
 multilinear in each 4-D cell, and a multilinear function's extremes over an
 axis-aligned box lie at the box's corners. Each player's set is covered by
 boxes, one per grid cell the disk meets, the bounding box of the part of
-the disk inside that cell (a cell an obstacle's edge cuts is split 4 x 4
-first, and the pieces wholly inside the obstacle dropped). The extreme over
+the disk inside that cell (a cell cut by the edge of where the player may be
+is split 4 x 4 first, and the pieces wholly outside it dropped). The extreme over
 the product of the two covers, which holds the product of the two sets, is
 the extreme over pairs of box corners. It is exact where the disk covers
 whole cells and errs only towards caution along the disk's rim, so it never
@@ -43,7 +43,7 @@ from bearcat.solvers.errors import InputError
 __all__ = ["Cover", "RobustCtf", "SideAnswer"]
 
 SPLIT = 4
-"""Sub-boxes per axis of a cell an obstacle's edge cuts."""
+"""Sub-boxes per axis of a cell cut by the edge of where a player may be."""
 
 DIRECTIONS = 32
 """Headings tried, besides the plain one and the one against the worst case."""
