@@ -231,7 +231,7 @@ def summarise(results, by=()) -> list[dict]:
         key = (r["scenario"], r["netem"], r.get("transport", "tcp"), *(labels.get(k) for k in by))
         groups[key].append(r)
     rows = []
-    for key, games in sorted(groups.items(), key=lambda item: tuple(map(_in_order, item[0]))):
+    for key, games in sorted(groups.items(), key=lambda item: _group_order(item[0])):
         scenario, netem, transport, *labels = key
         wins = sum(g["winner"] == "attacker" for g in games)
         held = sum(g["winner"] == "defender" for g in games)
@@ -302,6 +302,14 @@ def wilson(successes: int, trials: int) -> tuple[float, float]:
 
 def _interval(successes: int, trials: int) -> list[float]:
     return [round(x, 3) for x in wilson(successes, trials)]
+
+
+def _group_order(key: tuple) -> tuple:
+    """Scenario, then profile from the least impaired, then the labels."""
+    scenario, netem, *rest = key
+    return (str(scenario), PROFILES.index(netem) if netem in PROFILES else len(PROFILES), str(netem)) + tuple(
+        map(_in_order, rest)
+    )
 
 
 def _in_order(label) -> tuple:
