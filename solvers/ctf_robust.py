@@ -13,7 +13,9 @@ position) come from that. This module answers for the sets instead:
 - the defender's worst case is the smallest, so it is shown "winning" only
   if it wins against all of them;
 - each player's heading is the one whose step leaves its worst case best,
-  over the opponent's set, from the player's own fix.
+  over the opponent's set, from the player's own fix; an attacker that wins
+  against the whole set hurries instead, as the plain heading does: the
+  step that leaves its worst time to win (T*) least.
 
 How the extreme is found, exactly rather than by sampling: the value is
 multilinear in each 4-D cell, and a multilinear function's extremes over an
@@ -125,7 +127,8 @@ class RobustCtf:
         direction of steepest improvement of the worst case where one place
         is worst), the plain heading, and evenly spread ones, in that order;
         the first whose step leaves the worst case best wins, so the answer
-        is never worse in the worst case than the plain heading."""
+        is never worse in the worst case than the plain heading. An attacker
+        whose worst case is won scores the steps by its worst T* instead."""
         if side not in ("attacker", "defender"):
             raise InputError(f"side must be 'attacker' or 'defender', got {side!r}")
         flat = _flat(self.queries.value_set(phase).value)
@@ -146,18 +149,29 @@ class RobustCtf:
             against = None
         preferred = (against, getattr(plain, f"{side}_heading"))
         tried = np.array([h for h in preferred if h is not None] + [tuple(d) for d in self._directions])
-        k = _best_heading(
-            flat,
-            self._allowed[side],
-            self._lo,
-            self._spacing,
-            self._slack,
-            start,
-            self.step,
-            tried,
-            (opponent.nodes, opponent.weights),
-            side == "attacker",
-        )
+        # Where the attacker wins against the whole set the value is flat
+        # wherever every path reaches the target's deepest point, so, as the
+        # plain heading does (end of thesis 3.4), it hurries: the step that
+        # leaves its worst time to win, T* over the defender's set, least.
+        found = self.queries.value_set(phase)
+        hurry = side == "attacker" and worst <= 0 and found.time_to_win is not None
+        scored = [_flat(found.time_to_win), flat] if hurry else [flat]
+        k = -1
+        for matrix in scored:  # T* is infinite where a step leaves the set: then by the value
+            k = _best_heading(
+                matrix,
+                self._allowed[side],
+                self._lo,
+                self._spacing,
+                self._slack,
+                start,
+                self.step,
+                tried,
+                (opponent.nodes, opponent.weights),
+                side == "attacker",
+            )
+            if k >= 0:
+                break
         heading = None if k < 0 else (float(tried[k, 0]), float(tried[k, 1]))
         return SideAnswer(side, worst, heading, plain)
 
@@ -334,9 +348,10 @@ def _cover(allowed, lo, spacing, centre, r, slack):
 @numba.njit(cache=True)
 def _best_heading(flat, allowed, lo, spacing, slack, start, step, headings, opponent, attacker):
     """The index of the heading in ``headings`` (the first of equals) whose
-    step from ``start`` leaves the mover's worst case over the opponent's
-    corners (``opponent``: nodes, weights) best; -1 if every step leaves the
-    grid or the allowed space."""
+    step from ``start`` leaves the mover's worst case of ``flat`` (the value,
+    or T*) over the opponent's corners (``opponent``: nodes, weights) best,
+    and finite; -1 if no step stays on the grid, in the allowed space and
+    finite."""
     n0, n1 = allowed.shape
     nodes, weights = opponent
     here_nodes = np.zeros((1, 4), np.int64)
@@ -369,7 +384,7 @@ def _best_heading(flat, allowed, lo, spacing, slack, start, step, headings, oppo
                     else:
                         v += w_here * w_there * flat[nodes[q, t], here_nodes[0, s]]
             score = max(score, sign * v)
-        if score < best_score - 1e-9:
+        if score < best_score - 1e-9 and score < np.inf:
             best, best_score = k, score
     return best
 
