@@ -91,9 +91,9 @@ def fake_out_figure(rows):
     rows = [r for r in rows if r["defender"] != "human"]
     rates = sorted({r["rate"] for r in rows}) or [None]
     reactions = sorted({r["reaction"] for r in rows})
-    fig, axes = plt.subplots(1, len(rates), figsize=(5.6 * len(rates), 4.6), squeeze=False)
+    fig, axes = plt.subplots(1, len(rates), figsize=(5.2 * len(rates) + 1.6, 4.8), squeeze=False, layout="constrained")
     image = None
-    for ax, rate in zip(axes[0], rates):
+    for k, (ax, rate) in enumerate(zip(axes[0], rates)):
         at_rate = [r for r in rows if r["rate"] == rate]
         if not at_rate:
             ax.axis("off")
@@ -108,7 +108,8 @@ def fake_out_figure(rows):
             ax.text(j, i, f"{grid[i, j]:.0f}%\n{low:.0f}-{high:.0f}", ha="center", va="center", fontsize=8)
         image = ax.imshow(grid, cmap="RdBu_r", vmin=0, vmax=100, aspect="auto")
         ax.set_xticks(range(len(reactions)), [f"{t:g}" for t in reactions])
-        ax.set_yticks(range(len(kinds)), [f"marks {m:g} m" if m is not None else d for d, m in kinds])
+        names = [f"marks {m:g} m" if m is not None else d for d, m in kinds]
+        ax.set_yticks(range(len(kinds)), names if k == 0 else [])
         ax.set_xlabel("defender's reaction time (s)")
         ax.set_title(f"phones report at {rate:g} Hz")
     if image is not None:
