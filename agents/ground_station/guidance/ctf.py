@@ -61,8 +61,9 @@ class CtfAdvisor:
 
     def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
         """The CTF fields of ``agent``'s guidance. They depend only on the two
-        latest fixes and the phase, which change about once a second while
-        guidance goes out ten times, so the last answer per agent is kept."""
+        latest fixes and the phase (and, for robust guidance, the sets'
+        radii, rounded up to ``RADIUS_STEP``), which change less often than
+        guidance goes out, so the last answer per agent is kept."""
         latest = fixes.latest
         if self.attacker not in latest or self.defender not in latest:
             return {"game": "ctf", "note": "waiting for both players' fixes"}
