@@ -264,9 +264,14 @@ def _log_map(rec, rr, game_map: Map) -> None:
         rec.log(f"map/regions/{name}", rr.LineStrips2D(rings, colors=[REGIONS], labels=[name]), static=True)
 
 
+def _paler(colour: tuple) -> tuple:
+    """A shade halfway to white: what was reported of an agent, beside the marker of where it was."""
+    return tuple(int(c + (255 - c) * 0.5) for c in colour)
+
+
 def _log_fix(rec, rr, m, to_local, markers: _Markers) -> None:
     """A fix as a small dot in a paler shade of its agent's colour, beside the truth's marker."""
-    paler = tuple(int(c + (255 - c) * 0.5) for c in markers.colour(m["agent"]))
+    paler = _paler(markers.colour(m["agent"]))
     rec.log(
         f"ground/fix/{m['agent']}",
         rr.Points2D([to_local(m["lat"], m["lon"])], radii=0.35 * markers.size, colors=[paler]),
@@ -297,7 +302,7 @@ def _log_screen(rec, rr, m, to_local, markers: _Markers) -> None:
         others = [(r, p) for r, p in zip(reports, points) if r["agent"] != agent and r.get("radius")]
         if others:
             disks = [_disk(p, r["radius"]) for r, p in others]
-            colours = [markers.colour(r["agent"]) for r, _ in others]
+            colours = [_paler(markers.colour(r["agent"])) for r, _ in others]
             ages = [f"{r['agent']} {max(m['t'] - r['t'], 0.0):.1f} s ago" for r, _ in others]
             rec.log(f"{base}/disks", rr.LineStrips2D(disks, colors=colours, labels=ages))
             for (r, _), ring, colour in zip(others, disks, colours):
