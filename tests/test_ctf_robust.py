@@ -57,6 +57,12 @@ def a_radius(data, queries, who: str) -> float:
     return cells * min(queries.geometry.grid.spacing)
 
 
+def two_fixes(data, queries):
+    """The attacker's and the defender's fixes and their uncertainty radii."""
+    a, d = a_place(data, queries, "attacker"), a_place(data, queries, "defender")
+    return a, d, a_radius(data, queries, "attacker"), a_radius(data, queries, "defender")
+
+
 def in_disk(data, centre, radius, label) -> np.ndarray:
     r = radius * math.sqrt(data.draw(st.floats(0, 1), label=f"{label} depth"))
     t = data.draw(st.floats(0, 2 * math.pi), label=f"{label} angle")
@@ -69,8 +75,7 @@ def test_the_worst_cases_bound_the_value_at_every_truth_the_sets_allow(game, dat
     """So the robust go never fires when the truth inside the sets loses, and
     "winning" is never shown to a defender that is losing there."""
     queries, robust = game
-    a, d = a_place(data, queries, "attacker"), a_place(data, queries, "defender")
-    ra, rd = a_radius(data, queries, "attacker"), a_radius(data, queries, "defender")
+    a, d, ra, rd = two_fixes(data, queries)
     phase = data.draw(st.sampled_from(["capture", "return"]))
     covers = robust.cover("attacker", a, ra), robust.cover("defender", d, rd)
     attacker, defender = robust.answer("attacker", *covers, phase), robust.answer("defender", *covers, phase)
@@ -106,8 +111,7 @@ def test_robust_answers_are_the_plain_ones_at_zero_age_and_accuracy(game, data):
 @given(data=st.data())
 def test_a_larger_set_never_makes_the_worst_case_better(game, data):
     queries, robust = game
-    a, d = a_place(data, queries, "attacker"), a_place(data, queries, "defender")
-    ra, rd = a_radius(data, queries, "attacker"), a_radius(data, queries, "defender")
+    a, d, ra, rd = two_fixes(data, queries)
     grow = data.draw(st.floats(1.0, 3.0), label="growth")
     small = robust.cover("attacker", a, ra), robust.cover("defender", d, rd)
     large = robust.cover("attacker", a, ra * grow), robust.cover("defender", d, rd * grow)
@@ -143,8 +147,7 @@ def test_the_worst_case_is_within_a_cell_of_the_sampled_one(game):
 @given(data=st.data())
 def test_the_robust_heading_is_never_worse_in_the_worst_case_than_the_plain_one(game, data):
     queries, robust = game
-    a, d = a_place(data, queries, "attacker"), a_place(data, queries, "defender")
-    ra, rd = a_radius(data, queries, "attacker"), a_radius(data, queries, "defender")
+    a, d, ra, rd = two_fixes(data, queries)
     assume(ra > 0)
     covers = robust.cover("attacker", a, ra), robust.cover("defender", d, rd)
     answer = robust.answer("defender", *covers, "capture")
