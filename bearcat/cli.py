@@ -52,6 +52,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from bearcat.maps.errors import MapError
     from bearcat.netem.kernel.commands import KernelError
     from bearcat.netem.profiles import ProfileError
+    from bearcat.scenarios.faults import FaultError
     from bearcat.scenarios.schema import ScenarioError
     from bearcat.solvers.errors import InputError
 
@@ -61,6 +62,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
         MapError,
         InputError,
         ScenarioError,
+        FaultError,
         ProfileError,
         KernelError,
         BusError,

@@ -119,10 +119,7 @@ class LinkModel:
     bytes per second serialises messages (0: unlimited); ``idle_after``
     seconds without traffic demote the radio, and the next message waits a
     promotion delay drawn uniformly from ``promotion``; ``outages`` are time
-    windows without signal. ``lease`` is how long a Zenoh session on this
-    network waits for a silent peer before it declares it gone: a second on a
-    LAN, more where a cellular link stalls for longer (a shorter lease makes
-    sessions drop and reconnect, losing what they carried). How a TCP stream
+    windows without signal. How a TCP stream
     recovers what the link loses follows from the delays (``netem.link.Tcp``)."""
 
     delay: Delay = field(default_factory=Delay)
@@ -135,11 +132,10 @@ class LinkModel:
     idle_after: float = 0.0
     promotion: tuple[float, float] = (0.0, 0.0)
     outages: tuple[Outage, ...] = ()
-    lease: float = 1.0
 
     @property
     def ideal(self) -> bool:
-        return self == LinkModel(lease=self.lease)
+        return self == LinkModel()
 
 
 class GpsError(_Table):

@@ -61,7 +61,6 @@ class LinkTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only
     idle_after: Annotated[float, Meta(ge=0.0, le=3600.0, extra={"unit": "s"})] = LinkModel.idle_after
     promotion: Annotated[tuple[Lag, Lag], Meta(description="[shortest, longest] in seconds")] = LinkModel.promotion
     outages: tuple[Annotated[tuple[GameTime, GameTime], Meta(description="[start, end] in seconds")], ...] = ()
-    lease: Annotated[float, Meta(ge=0.5, le=60.0, extra={"unit": "s"})] = LinkModel.lease
 
 
 class ProfileTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True):
@@ -130,5 +129,4 @@ def _link_model(link: LinkTable, at: str) -> LinkModel:
         idle_after=link.idle_after,
         promotion=link.promotion,
         outages=tuple(Outage(start, end) for start, end in link.outages),
-        lease=link.lease,
     )

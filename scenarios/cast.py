@@ -186,7 +186,7 @@ class _CtfGame:
             forbidden=(("flag", self.flag), ("return", self.home)),
             flag_taken=self.flag_taken,
         )
-        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
+        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth, rejoin=self.scenario.lease)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
@@ -290,7 +290,7 @@ class _PursuitGame:
             teams=("evader", "pursuer"),
             lasting_wins=True,
         )
-        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
+        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth, rejoin=self.scenario.lease)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
@@ -333,7 +333,7 @@ class _ReachAvoidGame:
             teams=("attacker", "defender"),
             targets=tuple(self.targets),
         )
-        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth)
+        return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth, rejoin=self.scenario.lease)
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario

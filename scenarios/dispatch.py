@@ -11,6 +11,9 @@ agent, recorded as a ``failed`` event (the agent, the key it was handling or
 ``start``, ``tick``, and the exception's type and text) and logged with its
 traceback the first time and every hundredth after, so a tick that always
 fails cannot flood the log. Nothing is sent for the call that failed.
+
+An agent whose peer's clock is wrong (a clock fault) is handed its own
+time (``clocks``); the record keeps the runtime's.
 """
 
 from __future__ import annotations
@@ -37,6 +40,7 @@ class Dispatcher:
         self.record = record
         self.now = now
         self.failures: Counter[str] = Counter()  # agent -> exceptions raised
+        self.clocks: dict[str, Callable[[float], float]] = {}  # agent -> its own time from the runtime's
         self._sessions: dict[str, object] = {}
         self._inboxes: dict[str, Inbox] = {}
 
@@ -45,19 +49,27 @@ class Dispatcher:
         self._sessions[agent.name] = session
         self._inboxes[agent.name] = Inbox(agent.name)
 
+    def session_of(self, name: str):
+        """The session agent ``name`` was attached to."""
+        return self._sessions[name]
+
     @property
     def drops(self) -> dict[str, dict[str, int]]:
         """Per agent that had to drop anything, its drops by reason."""
         return {name: dict(inbox.drops) for name, inbox in self._inboxes.items() if inbox.dropped}
 
     def start(self, agent: Agent) -> None:
-        self._publish(agent, self._call(agent, "start", agent.start, self.now()))
+        self._publish(agent, self._call(agent, "start", agent.start, self._now(agent)))
 
     def tick(self, agent: Agent) -> None:
-        self._publish(agent, self._call(agent, "tick", agent.tick, self.now()))
+        self._publish(agent, self._call(agent, "tick", agent.tick, self._now(agent)))
 
     def peer(self, agent: Agent, key: str, alive: bool) -> None:
-        self._publish(agent, self._call(agent, key, agent.peer, key, alive, self.now()))
+        self._publish(agent, self._call(agent, key, agent.peer, key, alive, self._now(agent)))
+
+    def _now(self, agent: Agent) -> float:
+        clock = self.clocks.get(agent.name)
+        return self.now() if clock is None else clock(self.now())
 
     def receive(self, agent: Agent, key: str, payload: bytes, sender: str) -> Message | None:
         """Hand what arrived on ``key`` to ``agent``; the decoded message, None if refused."""
@@ -67,7 +79,7 @@ class Dispatcher:
             self.record.refused(now, sender, agent.name, key, "undecodable or wrong for its key")
             return None
         self.record.received(now, sender, agent.name, key, getattr(message, "seq", None))
-        self._publish(agent, self._call(agent, key, agent.handle, key, message, now))
+        self._publish(agent, self._call(agent, key, agent.handle, key, message, self._now(agent)))
         return message
 
     def _call(self, agent: Agent, where: str, method, *args) -> list[Send]:

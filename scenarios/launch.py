@@ -41,7 +41,6 @@ from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
-from bearcat.netem.profiles import load_profile
 from bearcat.scenarios.dispatch import FAILED
 from bearcat.scenarios.peers import KernelPeers, LocalPeers
 from bearcat.scenarios.schema import Scenario
@@ -136,7 +135,7 @@ def launch(
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim."""
     transport = transport or scenario.transport
-    lease_ms = round(1000 * load_profile(netem).link.lease)
+    lease_ms = round(1000 * scenario.lease)
     out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     port = free_port()

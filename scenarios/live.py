@@ -159,7 +159,7 @@ def start_peer(
     from bearcat.scenarios.schema import ScenarioError
 
     profile = load_profile(netem)
-    lease_ms = round(1000 * profile.link.lease)
+    lease_ms = round(1000 * scenario.lease)
     autopilot = None
     if role == "ground-station":
         players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge)

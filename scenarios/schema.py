@@ -65,6 +65,7 @@ from bearcat.bus.validation import Invalid, convert, not_one_of
 from bearcat.maps import Map, MapError, load_map
 from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
+from bearcat.scenarios.faults import Fault, check_faults
 
 TEAMS = {"ctf": ("attacker", "defender"), "reach-avoid": ("attacker", "defender"), "pursuit": ("evader", "pursuer")}
 MAX_CELLS = 2000
@@ -268,6 +269,10 @@ class ScenarioTable(_Table):
     transport: Transport = "tcp"
     seed: Annotated[int, Meta(ge=0)] = 0
     dead_zones: Annotated[tuple[Ring, ...], Meta(description="a list of polygons of [east, north] points")] = ()
+    # How long a silent peer's session lives before its liveliness vanishes
+    # (Zenoh's link lease in live runs, the same rule in simulation): long
+    # enough that a loaded machine or a stalled cellular link does not trip it.
+    lease: Annotated[float, Meta(ge=0.5, le=120.0, extra={"unit": "s"})] = 10.0
 
 
 class GuidanceTable(_Table):
@@ -287,6 +292,7 @@ class ScenarioFile(_Table):
     rules: dict[str, Any] = {}
     guidance: GuidanceTable = GuidanceTable()
     uav: tuple[UavSpec, ...] = ()
+    fault: tuple[Fault, ...] = ()
 
 
 @dataclass(frozen=True)
@@ -308,6 +314,8 @@ class Scenario:
     text: str  # the TOML it was read from, served to peers that ask
     dead_zones: tuple[tuple[tuple[float, float], ...], ...]
     uavs: tuple[UavSpec, ...]
+    lease: float = 10.0  # s a silent peer's liveliness outlives it
+    faults: tuple = ()  # the scenario's own fault plan (scenarios.faults)
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
@@ -396,6 +404,8 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         text=text,
         dead_zones=head.dead_zones,
         uavs=file.uav,
+        lease=head.lease,
+        faults=file.fault,
     )
 
 
@@ -433,6 +443,7 @@ def _check_against(file: ScenarioFile, rules, game_map: Map) -> None:
             f"{spacing:g} m makes {side / spacing:.0f} cells across map {game_map.name} ({side:g} m); "
             f"2 to {MAX_CELLS} are allowed",
         )
+    check_faults(file.fault, file.agent, file.uav)
     ids = [a.id for a in file.agent] + [u.id for u in file.uav]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:

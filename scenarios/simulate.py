@@ -8,7 +8,9 @@ arrivals are scheduled in virtual time. The agents are driven as in live
 runs (scenarios/dispatch.py: an agent's exception is recorded and the game
 goes on). The launcher's part is played here too: liveliness tokens for every peer, the start command at t = 0, and the
 end when the referee says the game is over. For a seed the run is
-deterministic, down to every line of its event log.
+deterministic, down to every line of its event log. A fault plan (the
+scenario's own, or one given) is applied in virtual time
+(``simulated_faults``).
 """
 
 from __future__ import annotations
@@ -29,7 +31,9 @@ from bearcat.netem.profiles import load_profile
 from bearcat.netem.shim import Shim
 from bearcat.scenarios.cast import Cast, build_cast
 from bearcat.scenarios.dispatch import Dispatcher
+from bearcat.scenarios.faults import GROUND, FaultError, refusal
 from bearcat.scenarios.schema import Scenario
+from bearcat.scenarios.simulated_faults import SimulatedFaults
 
 log = logging.getLogger(__name__)
 
@@ -58,6 +62,7 @@ class Outcome:
     drops: dict[str, dict[str, int]] = field(default_factory=dict)
     failures: dict[str, int] = field(default_factory=dict)
     notes: dict = field(default_factory=dict)
+    faults: list[dict] = field(default_factory=list)  # each fault applied: its index, kind, peers and time
 
 
 def simulate(
@@ -70,6 +75,7 @@ def simulate(
     ctf_progress=None,
     inspect=None,
     players: Cast | None = None,
+    faults: tuple | None = None,
 ) -> Outcome:
     """Play ``scenario`` once; ``events`` is the path of the event log to
     write. ``inspect(now, players)``, if given, looks at every agent's state
@@ -77,9 +83,13 @@ def simulate(
     ``players`` plays instead of the cast ``build_cast`` makes for the seed
     and network profile (built for the same ones, with an agent swapped or
     wrapped). ``netem`` and ``transport`` play it on another network than
-    the scenario's."""
+    the scenario's. ``faults`` is the fault plan to apply instead of the
+    scenario's own."""
     seed = scenario.seed if seed is None else int(seed)
     profile = load_profile(netem or scenario.netem)
+    plan = scenario.faults if faults is None else tuple(faults)
+    if (why := refusal(plan, "simulate")) is not None:
+        raise FaultError(why)
     if players is None:
         players = build_cast(scenario, profile, seed, ctf_progress=ctf_progress)
     env = simpy.Environment()
@@ -99,6 +109,7 @@ def simulate(
         record=record.impaired,
         colocated=ground,
         transport=transport or scenario.transport,
+        lease=scenario.lease,
     )
 
     def arrive(call, payload):
@@ -115,20 +126,28 @@ def simulate(
     dispatch = Dispatcher(record, lambda: env.now)
     final: dict = {}
 
-    def receiver(agent):
-        return lambda key, payload, sender: dispatch.receive(agent, key, payload, sender)
+    playing = {agent.name: agent for agent in players.agents}  # a restart puts a new agent in its place
 
-    def watcher(agent):
-        return lambda key, alive: dispatch.peer(agent, key, alive)
+    def receiver(name):
+        def receive(key, payload, sender):
+            if injector is None:
+                dispatch.receive(playing[name], key, payload, sender)
+            else:
+                injector.arrive(name, lambda: dispatch.receive(playing[name], key, payload, sender))
+
+        return receive
+
+    def watcher(name):
+        return lambda key, alive: dispatch.peer(playing[name], key, alive)
 
     sessions = {}
     for agent in players.agents:
         session = sessions[agent.name] = bus.session(agent.name)
         dispatch.attach(agent, session)
         for expr in agent.subscriptions:
-            session.subscribe(expr, receiver(agent))
+            session.subscribe(expr, receiver(agent.name))
         for expr in agent.watches:
-            session.subscribe_liveliness(expr, watcher(agent))
+            session.subscribe_liveliness(expr, watcher(agent.name))
     for agent in players.agents:
         sessions[agent.name].declare_token(keys.alive(scenario.name, agent.role, agent.name))
 
@@ -138,6 +157,8 @@ def simulate(
 
     def on_state(key, payload, sender):
         state = launcher_inbox.accept(key, payload)
+        if injector is not None and state is not None:
+            injector.saw(state, env.now)
         if isinstance(state, GameState) and state.phase == "ended" and not done.triggered:
             final["state"] = state
             done.succeed()
@@ -146,9 +167,10 @@ def simulate(
 
     def ticker(agent):
         dispatch.start(agent)
-        while True:
+        while playing[agent.name] is agent:
             yield env.timeout(agent.period)
-            dispatch.tick(agent)
+            if playing[agent.name] is agent and (injector is None or injector.running(agent.name)):
+                dispatch.tick(agent)
 
     def poller():
         while True:
@@ -161,11 +183,36 @@ def simulate(
             yield env.timeout(POLL)
             inspect(env.now, players)
 
+    def rebuild(peer: str, old: list) -> list:
+        """The agents of ``peer`` built afresh, as a restarted process builds them;
+        a UAV's vehicle flies on through its peer's restart."""
+        if peer == GROUND:
+            return build_cast(scenario, profile, seed, people=[], ground=True).ground
+        if peer in players.uavs:
+            pilots = {peer: old[0].autopilot}
+            cast = build_cast(scenario, profile, seed, people=[], uavs=[peer], ground=False, autopilots=pilots)
+            return list(cast.uavs.values())
+        return list(build_cast(scenario, profile, seed, people=[peer], ground=False).people.values())
+
+    injector = None
+    if plan:
+        injector = SimulatedFaults(
+            env,
+            scenario,
+            plan,
+            agents=playing,
+            ground=[a.name for a in players.ground],
+            dispatch=dispatch,
+            shim=shim,
+            record=record,
+            spawn=lambda agent: env.process(ticker(agent)),
+            rebuild=rebuild,
+        )
     for agent in players.agents:
         env.process(ticker(agent))
     if inspect is not None:
         env.process(inspector())
-    if zones is not None:
+    if zones is not None or plan:
         env.process(poller())
     start = Control(t=0.0, command="start")
     record.sent(0.0, LAUNCHER, keys.control(scenario.name), start)
@@ -188,6 +235,7 @@ def simulate(
         drops=dispatch.drops,
         failures=dict(sorted(dispatch.failures.items())),
         notes=_notes(players),
+        faults=[] if injector is None else injector.applied,
     )
     record.note(env.now, "outcome", **{k: v for k, v in vars(outcome).items() if k != "counts"})
     record.close()

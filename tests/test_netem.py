@@ -242,7 +242,6 @@ def test_a_misspelt_profile_key_is_named_with_its_file(tmp_path):
         ("[mine.link]\nburst = { p = 0.1 }\n", "mine.link.burst.r: must be given, as a probability in [0, 1]"),
         ("[mine.link]\ndelay = nan\n", "mine.link.delay: must be a number in [0, 60] s, got nan"),
         ("[mine.link]\njitter = -0.1\n", "mine.link.jitter: must be a number in [0, 60] s, got -0.1"),
-        ("[mine.link]\nlease = 0.1\n", "mine.link.lease: must be a number in [0.5, 60] s, got 0.1"),
         ("[mine.link]\nrate = inf\n", "mine.link.rate: must be a number in [0, 1e12] bytes/s, got inf"),
         (
             "[mine.link]\npromotion = [2.6, 1.0]\n",

@@ -202,8 +202,34 @@ def test_time_runs_out_for_the_attacker_and_a_vanished_peer_ends_the_game():
     assert state.winner == "defender" and "time limit" in state.reason and state.elapsed == pytest.approx(1.0)
     ref, field = referee()
     run_referee(ref, field, {"a": [(10.0, 20.0)] * 2, "d": [(40.0, 20.0)] * 2})
-    (send,) = ref.peer(keys.alive("g", "walker", "d"), False, 0.5)
+    assert ref.peer(keys.alive("g", "walker", "d"), False, 0.5) == []
+    ref.tick(0.5 + ref.rejoin - 0.1)
+    assert ref.phase == "running"  # it may yet rejoin
+    (send,) = ref.tick(0.5 + ref.rejoin)
     assert send.message.phase == "ended" and send.message.winner is None and "walker d is gone" in send.message.reason
+
+
+def test_a_player_that_rejoins_in_time_plays_on_and_captures_nobody_while_away():
+    ref, field = referee()
+    run_referee(ref, field, {"a": [(10.0, 20.0)] * 2, "d": [(40.0, 20.0)] * 2})
+    ref.peer(keys.alive("g", "walker", "d"), False, 0.3)
+    ref.handle(*truth(field, "a", 40.0, 21.0, 0.4), 0.4)  # right by the defender's last fix
+    ref.tick(0.4)
+    assert ref.captured == [] and ref.phase == "running"
+    ref.peer(keys.alive("g", "walker", "d"), True, 0.5)
+    ref.tick(0.5)
+    assert ref.captured == ["a"]  # back, and within reach
+
+
+def test_a_restarted_referee_resumes_the_game_clock_the_flag_and_the_captures():
+    ref, field = referee()
+    run_referee(ref, field, {"a": [(10.0, 20.0)] * 5, "d": [(40.0, 20.0)] * 5})
+    (last,) = ref.tick(3.0)
+    again, _ = referee()
+    again.resume(last.message)
+    (state,) = again.tick(10.0)
+    assert state.message.phase == "running" and state.message.elapsed == pytest.approx(10.0)
+    assert state.message.seq == last.message.seq + 1 and state.message.flag_holder == "a"
 
 
 def test_outcome_json_of_the_cli_matches_the_event_log(tmp_path):

@@ -20,17 +20,21 @@ from bearcat.netem.shim import Impairment
 
 
 class EventLog:
-    """Appends to ``path`` (JSON lines); with ``path`` None it only counts."""
+    """Appends to ``path`` (JSON lines); with ``path`` None it only counts.
+    ``last`` keeps the latest message each sender sent on each key, what a
+    peer restarted mid-game resumes from."""
 
     def __init__(self, path: str | Path | None = None) -> None:
         self.path = None if path is None else Path(path)
         self.counts: dict[str, int] = {}
+        self.last: dict[tuple[str, str], Message] = {}
         self._file = None
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self._file = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 (open for the log's lifetime)
 
     def sent(self, t: float, sender: str, key: str, message: Message) -> None:
+        self.last[(sender, key)] = message
         self._write({"event": "sent", "t": t, "sender": sender, "key": key, "message": msgspec.to_builtins(message)})
 
     def received(self, t: float, sender: str, receiver: str, key: str, seq: int | None = None) -> None:

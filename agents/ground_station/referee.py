@@ -13,7 +13,16 @@ in straight lines between two position updates, so the closest approach
 between them is exact (the remark at the end of thesis 5.3.1). In
 simulation the referee judges on the true positions; against hardware
 there are none, and it judges on the fixes and says so in every state it
-publishes. A peer whose liveliness vanishes ends the game with that reason.
+publishes.
+
+A player whose liveliness token vanishes and does not come back within
+``rejoin`` seconds ends the game with that reason: a phone whose app
+restarts rejoins, and so do the tokens a referee sees vanish when it is
+itself the one that stalled (its process paused, its host overloaded, its
+session lost and reopened). While it is away a player neither captures
+nor is captured, nor reaches a target: its last position is no body's.
+A referee restarted mid-game ``resume``s from the last state it sent:
+the phase, the game clock, who holds the flag, who was caught.
 """
 
 from __future__ import annotations
@@ -55,8 +64,18 @@ class Contest:
 class Referee:
     role = "referee"
 
-    def __init__(self, game: str, game_map: Map, contest: Contest, *, on_truth: bool = True, name: str = "referee"):
+    def __init__(
+        self,
+        game: str,
+        game_map: Map,
+        contest: Contest,
+        *,
+        on_truth: bool = True,
+        name: str = "referee",
+        rejoin: float = 10.0,
+    ):
         self.game, self.map, self.contest, self.name = game, game_map, contest, name
+        self.rejoin = float(rejoin)
         self.on_truth = on_truth
         source = keys.every(game, "truth" if on_truth else "fix")
         self.subscriptions = (source, keys.control(game))
@@ -75,6 +94,7 @@ class Referee:
         self._judged: dict[str, np.ndarray] = {}
         self._last_sent = -np.inf
         self._changed = True
+        self._missing: dict[str, tuple[float, str]] = {}  # player -> (since, role) while its token is away
         for _, geometry in (*contest.targets, *contest.forbidden):
             shapely.prepare(geometry)
 
@@ -100,28 +120,52 @@ class Referee:
 
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         parsed = keys.parse(key)
-        players = (*self.contest.runners, *self.contest.chasers)
-        if not alive and self.phase != "ended" and parsed.agent in players:
-            self._end(now, None, f"{parsed.role} {parsed.agent} is gone")
+        if parsed.agent not in (*self.contest.runners, *self.contest.chasers):
+            return self._maybe_state(now)
+        if alive:
+            self._missing.pop(parsed.agent, None)
+        elif self.phase != "ended":
+            self._missing.setdefault(parsed.agent, (now, parsed.role))
         return self._maybe_state(now)
 
     def tick(self, now: float) -> list[Send]:
+        self._forfeit(now)
         if self.phase == "running":
             self._judge(now)
         return self._maybe_state(now)
+
+    def resume(self, state: GameState) -> None:
+        """Take the game up from ``state``, the last this referee sent before it went down."""
+        self.seq, self.phase = state.seq, state.phase
+        self.started_at = None if state.phase == "waiting" else state.t - state.elapsed
+        self.winner, self.reason = state.winner, state.reason
+        self.ended_at = state.t if state.phase == "ended" else None
+        self.flag_holder = state.flag_holder
+        self.captured = list(state.captured)
+        names = [name for name, _ in self.contest.targets]
+        if state.flag_holder is not None and "flag" in names:
+            self.next_target[state.flag_holder] = names.index("flag") + 1
+        self._changed = True
+
+    def _forfeit(self, now: float) -> None:
+        """End the game for the first player gone for longer than ``rejoin``."""
+        for agent, (since, role) in self._missing.items():
+            if self.phase != "ended" and now - since >= self.rejoin:
+                self._end(now, None, f"{role} {agent} is gone")
 
     # ------------------------------------------------------------------ the rules
 
     def _judge(self, now: float) -> None:
         c = self.contest
+        here = {a: p for a, p in self._now.items() if a not in self._missing}
         for runner in c.runners:
-            if runner in self.captured or runner not in self._now:
+            if runner in self.captured or runner not in here:
                 continue
-            r0, r1 = self._judged.get(runner, self._now[runner]), self._now[runner]
+            r0, r1 = self._judged.get(runner, here[runner]), here[runner]
             for chaser in c.chasers:
-                if chaser not in self._now:
+                if chaser not in here:
                     continue
-                c0, c1 = self._judged.get(chaser, self._now[chaser]), self._now[chaser]
+                c0, c1 = self._judged.get(chaser, here[chaser]), here[chaser]
                 if first_contact(r0, r1, c0, c1, c.capture_radius) is not None:
                     self.captured.append(runner)
                     self._changed = True
@@ -129,12 +173,12 @@ class Referee:
         if self.captured and len(self.captured) == len(c.runners):
             return self._end(now, c.teams[1], f"{', '.join(self.captured)} captured")
         for chaser in c.chasers:
-            p = self._now.get(chaser)
+            p = here.get(chaser)
             for name, region in c.forbidden:
                 if p is not None and shapely.intersects_xy(region, *p):
                     return self._end(now, c.teams[0], f"{chaser} entered the {name} region")
         for runner in c.runners:
-            p = self._now.get(runner)
+            p = here.get(runner)
             k = self.next_target[runner]
             if runner in self.captured or p is None or k >= len(c.targets):
                 continue

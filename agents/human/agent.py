@@ -87,6 +87,12 @@ class HumanAgent:
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         return []
 
+    def resume(self, truth: Truth) -> None:
+        """Stand where ``truth``, the last this walker reported before its peer
+        went down, says: a person does not go back to the start when the
+        phone's app restarts."""
+        self.walker.position = np.array(self.walker.map.to_local(truth.lat, truth.lon), dtype=float)
+
     def _report(self, now: float) -> list[Send]:
         position, heading = self.walker.position, self.walker.heading
         lat, lon = self.walker.map.to_geodetic(position[0], position[1])

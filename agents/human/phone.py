@@ -86,6 +86,9 @@ class Phone:
         if self._buildings is not None:
             shapely.prepare(self._buildings)
         self._heading = 0.0
+        # A GPS fault: ("jump", offset), ("freeze", anything) or ("spoof", position), metres.
+        self.lie: tuple[str, tuple[float, float]] | None = None
+        self._told: tuple[float, float] | None = None  # the last position a fix reported, in metres
         self._region_shown: list = []
         self._region_local: list[np.ndarray] = []
 
@@ -102,7 +105,7 @@ class Phone:
             return None
         if heading is not None:
             self._heading = heading
-        x, y = np.asarray(position, float) + error
+        x, y = self._reported(np.asarray(position, float) + error)
         lat, lon = self.map.to_geodetic(x, y)
         reading = compass_degrees(self.compass.reading(self._heading))
         self.seq += 1
@@ -115,6 +118,18 @@ class Phone:
             heading=reading,
             accuracy=self.gps.model.horizontal_sigma(near <= self.gps.model.urban_distance),
         )
+
+    def _reported(self, measured) -> tuple[float, float]:
+        """Where the fix says the phone is: what it measured, unless its GPS lies."""
+        mode, where = self.lie or ("", (0.0, 0.0))
+        if mode == "jump":
+            measured = measured + np.asarray(where, float)
+        elif mode == "spoof":
+            measured = np.asarray(where, float)
+        elif mode == "freeze" and self._told is not None:
+            measured = np.asarray(self._told, float)
+        self._told = (float(measured[0]), float(measured[1]))
+        return self._told
 
     def show(self, guidance: Guidance, now: float) -> None:
         """Put a guidance message on the screen (an older one than shown is ignored)."""
