@@ -32,6 +32,8 @@ COMMANDS = {
     "simulate": ("simulate", "play a scenario in virtual time, every peer in this process"),
     "run": ("live", "play a scenario live: every peer its own process over Zenoh"),
     "view": ("live", "replay a run's Rerun recording"),
+    "check": ("check", "say which invariants a run directory shows held"),
+    "faults": ("faults", "run a fault-injection suite and check every run"),
     "peer": ("live", "start one peer by hand (a person at a keyboard, or against real hardware)"),
     "study": (
         "study",

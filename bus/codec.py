@@ -16,7 +16,18 @@ import msgspec
 
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
-from bearcat.bus.messages import AnyMessage, Control, Detection, Fix, GameState, Guidance, Message, Truth, UavTask
+from bearcat.bus.messages import (
+    AnyMessage,
+    Control,
+    Detection,
+    FaultNotice,
+    Fix,
+    GameState,
+    Guidance,
+    Message,
+    Truth,
+    UavTask,
+)
 
 log = logging.getLogger(__name__)
 
@@ -38,6 +49,7 @@ _FOR_KIND = {
     "guidance": (Guidance, "agent"),
     "state": (GameState, None),
     "control": (Control, None),
+    "fault": (FaultNotice, None),
     "uav-task": (UavTask, "uav"),
     "detection": (Detection, "uav"),
 }

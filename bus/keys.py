@@ -9,6 +9,7 @@
     bearcat/{game}/uav/{uav}/detection  an agent the UAV's camera saw
     bearcat/{game}/truth/{agent}        simulation only
     bearcat/{game}/control              start / pause / stop
+    bearcat/{game}/fault                a fault of the run's plan begins (fault injection)
     bearcat/{game}/alive/{role}/{agent} liveliness tokens
     bearcat/{game}/map, .../scenario    queryables of the ground station
 
@@ -40,6 +41,7 @@ _KINDS = {
     "detection": ("uav", "{}", "detection"),
     "truth": ("truth", "{}"),
     "control": ("control",),
+    "fault": ("fault",),
     "alive": ("alive", "{}", "{}"),
     "map": ("map",),
     "scenario": ("scenario",),
@@ -93,6 +95,10 @@ def truth(game: str, agent: str) -> str:
 
 def control(game: str) -> str:
     return _key(game, "control")
+
+
+def fault(game: str) -> str:
+    return _key(game, "fault")
 
 
 def alive(game: str, role: str, agent: str) -> str:

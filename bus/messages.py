@@ -67,7 +67,9 @@ class Fix(Message, tag="fix"):
 
 
 class Truth(Message, tag="truth"):
-    """Where an agent really is (simulation only; for the referee and the recorder)."""
+    """Where an agent really is (simulation only; for the referee and the
+    recorder); ``going``, that its behaviour has committed to its run (a
+    fake-out's go, a go-no-go's go), which faults may count from."""
 
     agent: Name
     t: Time
@@ -75,6 +77,7 @@ class Truth(Message, tag="truth"):
     lon: Longitude
     alt: Altitude | None = None
     heading: Heading | None = None
+    going: bool = False
 
 
 class Report(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
@@ -155,11 +158,12 @@ class GameState(Message, tag="state"):
 
 
 class Control(Message, tag="control"):
-    """A command to every peer of a game."""
+    """A command to every peer of a game; ``seq`` numbers a launcher's commands."""
 
     t: Time
     command: Literal["start", "pause", "resume", "stop"]
     reason: Text = ""
+    seq: Sequence = 0
 
 
 class UavTask(Message, tag="uav-task"):
@@ -184,5 +188,15 @@ class Detection(Message, tag="detection"):
     lon: Longitude
 
 
-AnyMessage = Fix | Truth | Guidance | GameState | Control | UavTask | Detection
+class FaultNotice(Message, tag="fault"):
+    """Fault ``fault`` of the run's plan holds from ``start`` until ``end``
+    (None: until healed or the end), on the launcher's clock: each peer
+    applies what concerns it."""
+
+    fault: Annotated[int, msgspec.Meta(ge=0, le=10_000)]
+    start: Time
+    end: Time | None = None
+
+
+AnyMessage = Fix | Truth | Guidance | GameState | Control | UavTask | Detection | FaultNotice
 MESSAGE_TYPES = (Fix, Truth, Guidance, GameState, Control, UavTask, Detection)

@@ -45,8 +45,8 @@ from bearcat.netem.link import LinkState, link_rng
 from bearcat.netem.models import LinkModel
 
 # Keys the shim never impairs: the simulation's ground truth, the launcher's
-# control channel (a local wire in the field) and liveliness.
-EXEMPT_KINDS = ("truth", "control", "alive", "map", "scenario")
+# control and fault channels (a local wire in the field) and liveliness.
+EXEMPT_KINDS = ("truth", "control", "fault", "alive", "map", "scenario")
 
 
 @dataclass(frozen=True)

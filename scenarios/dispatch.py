@@ -12,6 +12,9 @@ agent, recorded as a ``failed`` event (the agent, the key it was handling or
 traceback the first time and every hundredth after, so a tick that always
 fails cannot flood the log. Nothing is sent for the call that failed.
 
+What an agent did on its own and keeps in its ``events`` list (a UAV's
+failsafe, its landing) is recorded as ``did`` events, as it happens.
+
 An agent whose peer's clock is wrong (a clock fault) is handed its own
 time (``clocks``); the record keeps the runtime's.
 """
@@ -30,6 +33,7 @@ from bearcat.bus.messages import Message
 log = logging.getLogger(__name__)
 
 FAILED = "failed"  # the event kind of an agent's exception in the event log
+DID = "did"  # the event kind of what an agent did on its own
 
 
 class Dispatcher:
@@ -43,11 +47,13 @@ class Dispatcher:
         self.clocks: dict[str, Callable[[float], float]] = {}  # agent -> its own time from the runtime's
         self._sessions: dict[str, object] = {}
         self._inboxes: dict[str, Inbox] = {}
+        self._told: dict[str, int] = {}  # agent -> how many of its events are recorded
 
     def attach(self, agent: Agent, session) -> None:
         """Drive ``agent`` on ``session`` (peers that run several agents share one)."""
         self._sessions[agent.name] = session
         self._inboxes[agent.name] = Inbox(agent.name)
+        self._told[agent.name] = 0
 
     def session_of(self, name: str):
         """The session agent ``name`` was attached to."""
@@ -97,6 +103,11 @@ class Dispatcher:
             return []
 
     def _publish(self, agent: Agent, sends: list[Send]) -> None:
+        did = getattr(agent, "events", None)
+        if did:
+            for t, what in did[self._told.get(agent.name, 0) :]:
+                self.record.note(self.now(), DID, agent=agent.name, at=t, what=what)
+            self._told[agent.name] = len(did)
         session = self._sessions[agent.name]
         for s in sends:
             self.record.sent(self.now(), session.name, s.key, s.message)

@@ -124,6 +124,10 @@ class Partition(_Fault, tag="partition", kw_only=True):
     def peers(self) -> tuple[str, ...]:
         return tuple(p for group in self.groups for p in group)
 
+    def describe(self) -> str:
+        cut = " | ".join(" ".join(group) for group in self.groups)
+        return super().describe().replace(",".join(self.peers()), cut, 1)
+
 
 class Heal(_Fault, tag="heal", kw_only=True):
     """Every partition in force ends."""
@@ -167,7 +171,9 @@ class Gps(_Fault, tag="gps", kw_only=True):
 
 
 class DiskFull(_Fault, tag="disk-full", kw_only=True):
-    """The run directory's disk fills up (a small tmpfs holds the run)."""
+    """The run directory's disk fills up (a tmpfs of ``size`` bytes holds the run)."""
+
+    size: Annotated[int, Meta(ge=1 << 20, le=1 << 34, extra={"unit": "bytes"})] = 64 << 20
 
 
 class Cpu(_Fault, tag="cpu", kw_only=True):
@@ -222,6 +228,14 @@ def load_faults(path: str | Path, scenario) -> tuple[Fault, ...]:
     except Invalid as exc:
         raise FaultError(f"{path}: {exc}") from None
     return plan
+
+
+def write_faults(path: str | Path, faults) -> None:
+    """Write ``faults`` as a plan file (what a run keeps, and hands its peers)."""
+    import tomli_w
+
+    tables = [{k: v for k, v in msgspec.to_builtins(f).items() if v is not None} for f in faults]
+    Path(path).write_text(tomli_w.dumps({"fault": tables}), encoding="utf-8")
 
 
 def check_faults(faults, agents, uavs) -> None:

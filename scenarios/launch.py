@@ -19,6 +19,12 @@ The launcher's own session records every message of the game it sees into
 network shim did to the messages it received and its agents' failures into
 ``peers/NAME.jsonl``, and its log into ``peers/NAME.log``. The outcome counts
 the failures of each agent from those logs.
+
+A fault plan is kept in the run directory (``faults.toml``), handed to every
+peer, and applied by the launcher as the game goes (``live_faults``): a
+peer a fault kills is the referee's to judge once its lease to rejoin runs
+out, a restarted one is started again and resumes, and a ground station a
+fault kills for good ends the run, naming the fault.
 """
 
 from __future__ import annotations
@@ -31,7 +37,7 @@ import sys
 import threading
 import time
 from collections import Counter
-from contextlib import closing
+from contextlib import closing, nullcontext
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -42,8 +48,12 @@ from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.scenarios.dispatch import FAILED
+from bearcat.scenarios.faults import FaultError, refusal, write_faults
+from bearcat.scenarios.live_faults import LiveFaults
 from bearcat.scenarios.peers import KernelPeers, LocalPeers
+from bearcat.scenarios.run_directory import write_scenario
 from bearcat.scenarios.schema import Scenario
+from bearcat.scenarios.small_disk import SmallDisk
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +73,7 @@ class LiveOutcome:
     peers: dict[str, int | None] = field(default_factory=dict)  # exit codes
     failures: dict[str, int] = field(default_factory=dict)  # agent -> exceptions it raised
     out: str = ""
+    faults: list[dict] = field(default_factory=list)  # each fault applied: its index, kind, peers and time
 
 
 def free_port(kind=socket.SOCK_STREAM) -> int:
@@ -129,15 +140,50 @@ def launch(
     network: str = "shim",
     say=print,
     startup: float = STARTUP,
+    faults: tuple | None = None,
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
     ``transport`` is how best-effort messages travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
-    their packets, "shim" leaves the impairment to each peer's shim."""
-    transport = transport or scenario.transport
+    their packets, "shim" leaves the impairment to each peer's shim;
+    ``faults`` is the fault plan to apply (default: the scenario's)."""
+    plan = scenario.faults if faults is None else tuple(faults)
+    if (why := refusal(plan, "live")) is not None:
+        raise FaultError(why)
+    full = next((f for f in plan if f.kind == "disk-full"), None)
+    with SmallDisk(out, full.size) if full is not None else nullcontext() as disk:
+        outcome = _play(
+            scenario,
+            scenario_ref,
+            out,
+            plan,
+            seed=seed,
+            netem=netem,
+            transport=transport or scenario.transport,
+            network=network,
+            say=say,
+            startup=startup,
+            fill=None if disk is None else disk.fill,
+        )
+    if not (out / "outcome.json").exists():  # the full disk is gone with its fault
+        (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
+    try:
+        finish_run(out, scenario)
+    except OSError as exc:
+        say(f"the recording could not be made: {exc}")
+    return outcome
+
+
+def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network, say, startup, fill) -> LiveOutcome:
+    """Start the peers, play, stop them; the outcome, written beside what the run recorded if the disk lets it."""
     lease_ms = round(1000 * scenario.lease)
     out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
+    write_scenario(out, scenario)
+    plan_flags: tuple[str, ...] = ()
+    if plan:
+        write_faults(out / "faults.toml", plan)
+        plan_flags = ("--faults", str((out / "faults.toml").resolve()))
     port = free_port()
     places = KernelPeers(port, netem, seed, report=out / "network.json") if network == "kernel" else LocalPeers(port)
     endpoint = places.loopback
@@ -157,16 +203,20 @@ def launch(
         alive: set[str] = set()
         lock = threading.Lock()
         game = scenario.name
+        injector: LiveFaults | None = None
 
         def seen(key, payload, sender):
             message = inbox.accept(key, payload)
+            now = time.time()
             with lock:
                 if message is None:
-                    record.refused(time.time(), sender, "launcher", key, "undecodable or wrong for its key")
+                    record.refused(now, sender, "launcher", key, "undecodable or wrong for its key")
                     return
-                record.sent(time.time(), sender, key, message)
+                record.sent(now, sender, key, message)
                 if isinstance(message, GameState) and message.phase == "ended" and "state" not in final:
                     final["state"] = message
+            if injector is not None:
+                injector.saw(message, now)
 
         def liveliness(key, up):
             with lock:
@@ -191,19 +241,27 @@ def launch(
                 return lambda at: [
                     *peer_command(role, scenario_ref, name, at, seed, netem, out, transport),
                     *places.peer_flags,
+                    *plan_flags,
                     *extra,
                 ]
 
+            how: dict[str, tuple] = {}  # peer -> (role, flags): how to start it again
+
+            def start(name: str, *, again: bool = False) -> subprocess.Popen:
+                role, extra = how[name]
+                log = out / "peers" / f"{name}.log"
+                if again:
+                    extra = (*extra, "--resume")
+                return places.start(name, command(role, name, *extra), log, colocated=name == GROUND, again=again)
+
             roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
             for role, name in roles:
-                log = out / "peers" / f"{name}.log"
-                children[name] = places.start(name, command(role, name), log, colocated=name == GROUND)
+                how[name] = (role, ())
+                children[name] = start(name)
             for k, uav in enumerate(scenario.uavs):
                 port = free_port(socket.SOCK_DGRAM)
-                fly = ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated")
-                flyer = children[uav.id] = places.start(
-                    uav.id, command("uav", uav.id, *fly), out / "peers" / f"{uav.id}.log"
-                )
+                how[uav.id] = ("uav", ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"))
+                flyer = children[uav.id] = start(uav.id)
                 vehicle = f"vehicle-{uav.id}"
                 children[vehicle] = places.start_vehicle(
                     flyer, vehicle_command(scenario, k, port), out / "peers" / f"{vehicle}.log"
@@ -228,16 +286,35 @@ def launch(
                     break
                 time.sleep(0.05)
             if reason is None:
-                start = Control(t=time.time(), command="start")
-                places.game_started(start.t)
-                session.put(keys.control(game), encode(start))
+                if plan:
+                    injector = LiveFaults(
+                        plan,
+                        game=game,
+                        session=session,
+                        record=record,
+                        lock=lock,
+                        children=children,
+                        restart=lambda name: start(name, again=True),
+                        network=getattr(places, "network", None),
+                        logs=out / "peers",
+                        fill=fill,
+                    )
+                begin = Control(t=time.time(), command="start", seq=1)
+                places.game_started(begin.t)
+                session.put(keys.control(game), encode(begin))
+                if injector is not None:
+                    injector.begin(begin.t)
                 started_at = time.monotonic()
                 say(f"{game}: {len(expected)} peers up; game started")
-                reason = _supervise(children, final, lock, started_at, scenario.time_limit + GRACE)
+                limit = scenario.time_limit + GRACE
+                reason = _supervise(children, final, lock, started_at, limit, scenario.lease, injector)
         except KeyboardInterrupt:
             reason = "interrupted"
         finally:
+            if injector is not None:
+                injector.close()
             codes = _stop_all(session, game, children, final, lock, reason)
+            _say_how_they_ended(out / "peers", codes)
             state = final.get("state")
             outcome = LiveOutcome(
                 scenario=game,
@@ -248,11 +325,30 @@ def launch(
                 peers=codes,
                 failures=agent_failures(out / "peers"),
                 out=str(out),
+                faults=[] if injector is None else injector.applied,
             )
             record.note(time.time(), "outcome", **vars(outcome))
-            (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
-    finish_run(out, scenario)
+            _keep(out, outcome, record, say)
     return outcome
+
+
+def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:
+    """Write the outcome; a disk that refuses it gets it said instead, and so do the lines it refused."""
+    text = json.dumps(vars(outcome), indent=2) + "\n"
+    try:
+        (out / "outcome.json").write_text(text)
+    except OSError as exc:
+        say(f"cannot write {out / 'outcome.json'} ({exc.strerror or exc}); the outcome:\n{text}")
+    if record.lost:
+        say(f"{out / 'events.jsonl'}: the disk refused {record.lost} line(s) ({record.failure})")
+
+
+def _say_how_they_ended(peers: Path, codes: dict[str, int | None]) -> None:
+    """A peer killed by a signal cannot say how it ended: its log says it for it."""
+    for name, code in codes.items():
+        if code is not None and code < 0:
+            with open(peers / f"{name}.log", "a", encoding="utf-8") as log_file:
+                log_file.write(f"peer {name}: killed by signal {-code}\n")
 
 
 def agent_failures(peers: Path) -> dict[str, int]:
@@ -263,20 +359,26 @@ def agent_failures(peers: Path) -> dict[str, int]:
     return dict(sorted(counts.items()))
 
 
-def _supervise(children, final, lock, started_at: float, limit: float) -> str | None:
-    """Wait for the end of the game; why the launcher had to end it, if it did."""
+def _supervise(children, final, lock, started_at: float, limit: float, lease: float, injector) -> str | None:
+    """Wait for the end of the game; why the launcher had to end it, if it did
+    (a dead walker's forfeit is the referee's to call, once its ``lease`` to
+    rejoin has run out; a peer a fault restarts is not dead)."""
     gone_since = None
     while True:
         with lock:
             if "state" in final:
                 return None
-        dead = [n for n, p in children.items() if p.poll() is not None]
+        if injector is not None:
+            injector.respawn()
+        downed = {} if injector is None else dict(injector.out_of_play)
+        dead = [n for n, p in children.items() if p.poll() is not None and not downed.get(n, ("", False))[1]]
         if dead:
             if GROUND in dead:
+                if GROUND in downed:
+                    return f"the ground station is gone: {downed[GROUND][0]}"
                 return f"the ground station exited with code {children[GROUND].returncode}"
-            # The referee sees a walker's token vanish and ends the game; give it a moment.
             gone_since = gone_since or time.monotonic()
-            if time.monotonic() - gone_since > 3.0:
+            if time.monotonic() - gone_since > lease + 3.0:
                 return f"peer {dead[0]} exited with code {children[dead[0]].returncode}"
         if time.monotonic() - started_at > limit:
             return f"no result within {limit:g} s"
@@ -288,7 +390,8 @@ def _stop_all(session, game: str, children, final, lock, reason) -> dict[str, in
         ended = "state" in final
     if not ended and children:
         try:
-            session.put(keys.control(game), encode(Control(t=time.time(), command="stop", reason=(reason or "")[:200])))
+            stop = Control(t=time.time(), command="stop", reason=(reason or "")[:200], seq=2)
+            session.put(keys.control(game), encode(stop))
         except Exception:
             log.exception("could not send the stop command")
     for signal_name in ("wait", "terminate", "kill"):

@@ -7,8 +7,15 @@ and the agent handles it. Each agent ticks at its period on the wall clock
 (without drift: the next tick is scheduled from the last one's due time,
 not from when it ran). A liveliness token announces each agent. The peer
 ends a second after it sees the game end (so its last messages get out),
-on a stop from the launcher, or on SIGINT/SIGTERM, and closes its session
-in every case.
+on a stop from the launcher, on SIGINT/SIGTERM, or once the ground station
+has been gone for longer than the lease (a player's peer has nobody to play
+for), and closes its session in every case.
+
+A run with a fault plan announces each fault as it begins on the game's
+fault key; the peer applies what concerns it (``fault_effects``): its
+shim cuts or degrades links (on the shim only: on a kernel network the
+hub drops the packets), its agents' clock jumps or drifts, its phone's
+GPS lies. Only the launcher announces faults.
 """
 
 from __future__ import annotations
@@ -22,9 +29,11 @@ from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
 from bearcat.bus.codec import Inbox
-from bearcat.bus.messages import Control, GameState
+from bearcat.bus.messages import Control, FaultNotice, GameState
 from bearcat.netem.shim import Shim
 from bearcat.scenarios.dispatch import Dispatcher
+from bearcat.scenarios.fault_effects import LAUNCHER, NETWORK_KINDS, apply_network, lie, skewed
+from bearcat.scenarios.faults import Clock, Gps
 
 log = logging.getLogger(__name__)
 
@@ -32,10 +41,22 @@ LINGER = 1.0  # s a peer stays up after the game ended
 POLL = 0.1
 
 
-async def run_peer(agents, session, game: str, *, shim: Shim | None = None, record: EventLog | None = None) -> str:
+async def run_peer(
+    agents,
+    session,
+    game: str,
+    *,
+    shim: Shim | None = None,
+    record: EventLog | None = None,
+    faults: tuple = (),
+    network: str = "shim",
+    lease: float | None = None,
+) -> str:
     """Drive ``agents`` on ``session`` until the game ends; why it stopped,
     and how often each agent failed if any did. The session is closed on the
-    way out, while the loop still stands, so no late sample is handed to it."""
+    way out, while the loop still stands, so no late sample is handed to it.
+    ``faults`` is the run's fault plan, ``network`` where it runs; with a
+    ``lease``, the peer stops when the ground station has been gone that long."""
     loop = asyncio.get_running_loop()
     clock = WallClock()
     record = record or EventLog(None)
@@ -84,6 +105,51 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
             session.subscribe(expr, lambda k, p, s, arrived=arrived: soon(arrived, k, p, s))
         for expr in agent.watches:
             session.subscribe_liveliness(expr, lambda k, alive, a=agent: soon(dispatch.peer, a, k, alive))
+
+    def on_notice(key, payload, sender):
+        notice = notices.accept(key, payload)
+        if not isinstance(notice, FaultNotice) or sender != LAUNCHER or notice.fault >= len(faults):
+            log.warning("a fault notice from %r was refused", sender)
+            return
+        fault, now = faults[notice.fault], clock.now()
+        if fault.kind in NETWORK_KINDS and network == "shim" and shim is not None:
+            apply_network(fault, shim, notice.start, notice.end, lambda peer: [peer])
+        elif isinstance(fault, Clock) and fault.target == session.name:
+            for agent in agents:
+                dispatch.clocks[agent.name] = skewed(fault, notice.start)
+            if notice.end is not None:
+                loop.call_later(notice.end - now, lambda: [dispatch.clocks.pop(a.name, None) for a in agents])
+        elif isinstance(fault, Gps):
+            for agent in agents:
+                if agent.name == fault.target:
+                    agent.phone.lie = lie(fault)
+                    if notice.end is not None:
+                        loop.call_later(notice.end - now, setattr, agent.phone, "lie", None)
+
+    notices = Inbox(session.name)
+    if faults:
+        session.subscribe(keys.fault(game), lambda k, p, s: soon(on_notice, k, p, s))
+
+    orphaned: dict[str, asyncio.TimerHandle] = {}
+
+    def ground(key, alive):
+        """The ground station's token came or went: a player's peer waits a lease for it, then stops."""
+        if alive:
+            for timer in orphaned.values():
+                timer.cancel()
+            orphaned.clear()
+        elif not orphaned and not finished.is_set():
+
+            def give_up():
+                why["reason"] = f"the ground station has been gone for {lease:g} s"
+                finished.set()
+
+            orphaned["timer"] = loop.call_later(lease, give_up)
+
+    if lease is not None and all(agent.role == "walker" for agent in agents):
+        session.subscribe_liveliness(
+            keys.alive(game, "ground-station", GROUND_PEERS[0]), lambda k, alive: soon(ground, k, alive)
+        )
     for agent in agents:
         session.declare_token(keys.alive(game, agent.role, agent.name))
 
@@ -108,7 +174,7 @@ async def run_peer(agents, session, game: str, *, shim: Shim | None = None, reco
         except (NotImplementedError, RuntimeError):  # not the main thread
             pass
     tasks = [asyncio.create_task(ticker(a)) for a in agents]
-    if shim is not None and shim.dead_zones is not None:
+    if shim is not None and (shim.dead_zones is not None or faults):
         tasks.append(asyncio.create_task(poller()))
     try:
         await finished.wait()
@@ -141,8 +207,12 @@ def start_peer(
     vehicle: str | None = None,
     sysid: int | None = None,
     emulated: bool = False,
+    faults: tuple = (),
+    resume: bool = False,
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
+    ``faults`` is the run's fault plan; a peer restarted mid-game ``resume``s
+    from its own log in ``out``.
     With ``transport`` "udp" its best-effort messages go to the same
     endpoints over ``udp/`` (see ``bus.zenoh_session``). On a ``network``
     "kernel" the links are impaired below it, so its shim keeps only the
@@ -195,12 +265,19 @@ def start_peer(
         agents, name = [players.people[agent]], agent
     else:
         raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker or uav")
+    if resume and out is not None:
+        from bearcat.scenarios.recovery import last_sent
+        from bearcat.scenarios.recovery import resume as take_up
+
+        last = last_sent(f"{out}/peers/{name}.jsonl")
+        for agent in agents:
+            take_up(agent, last, scenario.name)
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
     if mode == "client" and listen is None:
         listen = []  # a client does not listen
     with (
-        closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl")) as record,
+        closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl", append=True)) as record,
         ZenohSession(
             name,
             config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms),
@@ -235,11 +312,21 @@ def start_peer(
             colocated=GROUND_PEERS,
             epoch=None,
             transport=transport,
+            lease=scenario.lease,
         )
         keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
         if keyboard:
             _read_keys(keyboard[0].behaviour)
-        peer = run_peer(agents, session, scenario.name, shim=shim, record=record)
+        peer = run_peer(
+            agents,
+            session,
+            scenario.name,
+            shim=shim,
+            record=record,
+            faults=faults,
+            network=network,
+            lease=scenario.lease,
+        )
         return asyncio.run(peer if autopilot is None else _fly(autopilot, peer))
 
 

@@ -43,11 +43,12 @@ class LocalPeers:
         return [self.loopback, best_effort_endpoint(self.loopback)]
 
     def start(
-        self, name: str, command: Callable[[str], list[str]], log: Path, *, colocated: bool = False
+        self, name: str, command: Callable[[str], list[str]], log: Path, *, colocated: bool = False, again: bool = False
     ) -> subprocess.Popen:
-        """Start peer ``name`` running ``command(endpoint)``, its output in ``log``;
-        a ``colocated`` peer shares the router's machine (the ground station)."""
-        return _child(command(self.loopback), log)
+        """Start peer ``name`` running ``command(endpoint)``, its output in ``log``
+        (after what it wrote before, when it starts ``again``); a ``colocated``
+        peer shares the router's machine (the ground station)."""
+        return _child(command(self.loopback), log, again)
 
     def start_vehicle(self, flyer: subprocess.Popen, command: list[str], log: Path) -> subprocess.Popen:
         """Start the vehicle emulator ``flyer``'s UAV peer flies, where that peer reaches it on its loopback."""
@@ -85,10 +86,10 @@ class KernelPeers(LocalPeers):
         outside = f"tcp/{self.network.router}:{self.port}"
         return [*super().listen, outside, best_effort_endpoint(outside)]
 
-    def start(self, name, command, log, *, colocated=False) -> subprocess.Popen:
+    def start(self, name, command, log, *, colocated=False, again=False) -> subprocess.Popen:
         if colocated:
-            return super().start(name, command, log)
-        with open(log, "w") as output:
+            return super().start(name, command, log, again=again)
+        with open(log, "a" if again else "w") as output:
             return self.network.spawn(name, command(f"tcp/{self.network.router}:{self.port}"), log_file=output)
 
     def start_vehicle(self, flyer, command, log) -> subprocess.Popen:
@@ -102,9 +103,9 @@ class KernelPeers(LocalPeers):
         return self.network.describe()
 
 
-def _child(command: list[str], log: Path) -> subprocess.Popen:
+def _child(command: list[str], log: Path, again: bool = False) -> subprocess.Popen:
     # The child keeps its own copy of the log's descriptor; ours closes at once.
-    with open(log, "w") as output:
+    with open(log, "a" if again else "w") as output:
         return subprocess.Popen(
             command, stdout=output, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent
         )

@@ -183,6 +183,11 @@ def simulate(
             yield env.timeout(POLL)
             inspect(env.now, players)
 
+    def halt(reason: str) -> None:
+        if not done.triggered:
+            final["halted"] = reason
+            done.succeed()
+
     def rebuild(peer: str, old: list) -> list:
         """The agents of ``peer`` built afresh, as a restarted process builds them;
         a UAV's vehicle flies on through its peer's restart."""
@@ -207,6 +212,7 @@ def simulate(
             record=record,
             spawn=lambda agent: env.process(ticker(agent)),
             rebuild=rebuild,
+            halt=halt,
         )
     for agent in players.agents:
         env.process(ticker(agent))
@@ -214,7 +220,7 @@ def simulate(
         env.process(inspector())
     if zones is not None or plan:
         env.process(poller())
-    start = Control(t=0.0, command="start")
+    start = Control(t=0.0, command="start", seq=1)
     record.sent(0.0, LAUNCHER, keys.control(scenario.name), start)
     launcher.put(keys.control(scenario.name), encode(start))
     env.run(until=env.any_of([done, env.timeout(scenario.time_limit + GRACE)]))
@@ -226,7 +232,9 @@ def simulate(
         netem=profile.name,
         transport=transport or scenario.transport,
         winner=state.winner if state else None,
-        reason=state.reason if state else f"no result within {scenario.time_limit + GRACE:g} s of game time",
+        reason=state.reason
+        if state
+        else final.get("halted", f"no result within {scenario.time_limit + GRACE:g} s of game time"),
         elapsed=state.elapsed if state else env.now,
         ended=state is not None,
         flag_holder=state.flag_holder if state else None,

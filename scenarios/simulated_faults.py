@@ -21,9 +21,10 @@ its live counterpart acts on the process:
   (its agents are handed their own time); its phone's GPS lies.
 
 Every fault, when it starts and ends, is noted in the event log
-(``fault`` and ``fault-end``), and so is every token the launcher's side
-(the ground station's laptop) sees vanish or come back (``gone``,
-``alive``), as the live launcher notes them: the run checker reads both.
+(``fault`` and ``fault-end``), and so is every token the launcher (beside
+the ground station, on its side of any partition) sees vanish or come
+back (``gone``, ``alive``), as the live launcher notes them: the run
+checker reads both.
 """
 
 from __future__ import annotations
@@ -31,9 +32,10 @@ from __future__ import annotations
 import zenoh
 
 from bearcat.bus import keys
-from bearcat.bus.messages import GameState, Truth
-from bearcat.netem.profiles import load_profile
+from bearcat.bus.messages import GameState
+from bearcat.scenarios.fault_effects import LAUNCHER, apply_network, lie, noted, sides, skewed
 from bearcat.scenarios.faults import GROUND, Fault
+from bearcat.scenarios.recovery import resume
 
 WATCH = 0.1  # s between looks for the events faults count from
 
@@ -44,16 +46,18 @@ class SimulatedFaults:
     ``agents`` maps each agent's name to the agent now playing it (a
     restart puts a new one there); ``ground`` names the ground station's
     agents; ``spawn(agent)`` starts driving a new agent; ``rebuild(peer,
-    old)`` builds a peer's agents afresh."""
+    old)`` builds a peer's agents afresh; ``halt(reason)`` ends the run, as
+    the live launcher does when the ground station dies for good."""
 
     def __init__(
-        self, env, scenario, plan: tuple[Fault, ...], *, agents, ground, dispatch, shim, record, spawn, rebuild
+        self, env, scenario, plan: tuple[Fault, ...], *, agents, ground, dispatch, shim, record, spawn, rebuild, halt
     ) -> None:
         self.env, self.scenario, self.plan = env, scenario, plan
         self.agents, self.dispatch, self.shim, self.record = agents, dispatch, shim, record
-        self.spawn, self.rebuild = spawn, rebuild
+        self.spawn, self.rebuild, self.halt = spawn, rebuild, halt
         self.lease = scenario.lease
-        self.members: dict[str, list[str]] = {GROUND: list(ground)}
+        # The launcher runs no agent; it watches, beside the ground station.
+        self.members: dict[str, list[str]] = {GROUND: list(ground), LAUNCHER: []}
         for name in agents:
             if name not in ground:
                 self.members[name] = [name]
@@ -92,7 +96,7 @@ class SimulatedFaults:
     def _run(self, k: int, fault: Fault):
         if fault.after != "start":
             yield self._event(fault.after)
-        yield self.env.timeout(fault.at)
+        yield self.env.timeout(max(self.happened[fault.after] + fault.at - self.env.now, 0.0))
         self._apply(k, fault)
 
     def _event(self, name: str):
@@ -116,10 +120,8 @@ class SimulatedFaults:
         while goers:
             yield self.env.timeout(WATCH)
             for agent in list(goers):
-                behaviour = self.agents[agent].behaviour
-                went = getattr(behaviour, "went_at", None) or getattr(behaviour, "committed_at", None)
-                if went is not None:
-                    self._happen(f"{agent}.goes", went)
+                if self.agents[agent].going:
+                    self._happen(f"{agent}.goes", self.env.now)
                     goers.discard(agent)
 
     def _later(self, delay: float, action) -> None:
@@ -129,8 +131,7 @@ class SimulatedFaults:
 
     def _apply(self, k: int, fault: Fault) -> None:
         now = self.env.now
-        self.applied.append({"fault": k, "kind": fault.kind, "peers": list(fault.peers()), "t": now})
-        self.record.note(now, "fault", fault=k, kind=fault.kind, peers=list(fault.peers()), describe=fault.describe())
+        self.applied.append(noted(self.record, k, fault, now))
         ends = fault.ends
         if ends is not None and fault.kind not in ("restart", "partition"):
             self._later(ends, lambda: self.record.note(self.env.now, "fault-end", fault=k, kind=fault.kind))
@@ -138,6 +139,8 @@ class SimulatedFaults:
 
     def _kill(self, k, fault, now) -> None:
         self._down(fault.target, now)
+        if fault.target == GROUND:
+            self.halt(f"the ground station is gone: fault[{k}] ({fault.describe()})")
 
     _stop = _kill
 
@@ -148,7 +151,7 @@ class SimulatedFaults:
             old = [self.agents[name] for name in self.members[fault.target]]
             fresh = self.rebuild(fault.target, old)
             for agent in fresh:
-                self._resume(agent)
+                resume(agent, self.record.last, self.scenario.name)
                 self.agents[agent.name] = agent
                 self.dispatch.attach(agent, self.dispatch.session_of(agent.name))
             self.state[fault.target] = "up"
@@ -184,23 +187,10 @@ class SimulatedFaults:
         self._later(fault.duration, wake)
 
     def _partition(self, k, fault, now) -> None:
-        groups = [list(g) for g in fault.groups]
-        home = next((j for j, g in enumerate(groups) if GROUND in g), len(groups))
-        side = {peer: j for j, g in enumerate(groups) for peer in g}
-        self._cut(k, side, home, now, fault.duration)
-
-    def _outage(self, k, fault, now) -> None:
-        self._cut(k, {fault.target: 1}, 0, now, fault.duration)
-
-    def _heal(self, k, fault, now) -> None:
-        self.shim.heal(now)
-
-    def _cut(self, k: int, side: dict[str, int], rest: int, now: float, duration: float | None) -> None:
-        """Cut the links between peers on different sides (peers ``side`` does not name are on ``rest``)."""
-        by_agent = {a: j for peer, j in side.items() for a in self.members[peer]}
-        if side.get(GROUND, rest) != rest:
-            by_agent["launcher"] = side[GROUND]
-        cut = self.shim.cut(by_agent, now, None if duration is None else now + duration, rest)
+        """Cut the links between peers on different sides; past the lease, each side sees the other go."""
+        apply_network(fault, self.shim, now, None if fault.duration is None else now + fault.duration, self._names)
+        cut = self.shim.cuts[-1]
+        side, rest = sides(fault)
         split = [(a, b) for a in self.members for b in self.members if side.get(a, rest) != side.get(b, rest)]
 
         def expire():
@@ -220,23 +210,23 @@ class SimulatedFaults:
         self._later(self.lease, expire)
         self._later(WATCH, heal_check)
 
+    _outage = _partition
+
+    def _heal(self, k, fault, now) -> None:
+        apply_network(fault, self.shim, now, None, self._names)
+
     def _degrade(self, k, fault, now) -> None:
-        names = set(self.members[fault.target])
-        self.shim.degrade(names, load_profile(fault.profile).link, fault.profile, now, now + fault.duration)
+        apply_network(fault, self.shim, now, now + fault.duration, self._names)
 
     def _clock(self, k, fault, now) -> None:
-        def clock(t, at=now, offset=fault.offset, drift=fault.drift):
-            return t + offset + drift * (t - at)
-
         names = self.members[fault.target]
         for name in names:
-            self.dispatch.clocks[name] = clock
+            self.dispatch.clocks[name] = skewed(fault, now)
         if fault.duration is not None:
             self._later(fault.duration, lambda: [self.dispatch.clocks.pop(n, None) for n in names])
 
     def _gps(self, k, fault, now) -> None:
-        phone = self.agents[fault.target].phone
-        phone.lie = (fault.mode, fault.position if fault.mode == "spoof" else fault.offset)
+        self.agents[fault.target].phone.lie = lie(fault)
         if fault.duration is not None:
             self._later(fault.duration, lambda: setattr(self.agents[fault.target].phone, "lie", None))
 
@@ -247,16 +237,9 @@ class SimulatedFaults:
         self.waiting[peer] = []
         self._show(peer, self._others(peer), False)
 
-    def _resume(self, agent) -> None:
-        """Hand a rebuilt agent what its predecessor last sent."""
-        if hasattr(agent, "walker"):
-            truth = self.record.last.get((agent.name, keys.truth(self.scenario.name, agent.name)))
-            if isinstance(truth, Truth):
-                agent.resume(truth)
-        elif hasattr(agent, "resume"):
-            state = self.record.last.get((agent.name, keys.state(self.scenario.name)))
-            if isinstance(state, GameState):
-                agent.resume(state)
+    def _names(self, peer: str) -> list[str]:
+        """The session names of ``peer``'s agents (the launcher's own)."""
+        return self.members[peer] or [peer]
 
     def _others(self, peer: str) -> list[str]:
         return [p for p in self.members if p != peer]
@@ -272,7 +255,7 @@ class SimulatedFaults:
             (self._unseen.discard if alive else self._unseen.add)(pair)
             if self.state[watcher] != "up":
                 continue
-            if watcher == GROUND:  # the launcher shares the ground station's side
+            if watcher == LAUNCHER:
                 for token in tokens:
                     self.record.note(now, "alive" if alive else "gone", key=token)
             for name in self.members[watcher]:

@@ -4,13 +4,18 @@
 message when; ``impaired`` lines say what the network did (delivered late
 and by how much, duplicated, dropped and why, held in a dead zone), so an
 analysis can tell a late fix from a lost one; ``outcome`` closes the log.
-Lines are written as they happen and flushed, so a run that dies loses
-nothing it had already recorded.
+Lines are written as they happen, each with one system call, so a run that
+dies loses nothing it had already recorded. A write the disk refuses (full,
+read-only) loses that line and no more: the file is cut back to its last
+whole line, the loss is counted (``lost``) and logged, and the game goes
+on; the recording is never worth the game.
 """
 
 from __future__ import annotations
 
 import json
+import logging
+import os
 from pathlib import Path
 
 import msgspec
@@ -18,23 +23,31 @@ import msgspec
 from bearcat.bus.messages import Message
 from bearcat.netem.shim import Impairment
 
+log = logging.getLogger(__name__)
+
 
 class EventLog:
     """Appends to ``path`` (JSON lines); with ``path`` None it only counts.
-    ``last`` keeps the latest message each sender sent on each key, what a
-    peer restarted mid-game resumes from."""
+    ``last`` keeps the latest message sent on each key, what a peer
+    restarted mid-game resumes from. A peer's log is opened to ``append``,
+    so a restarted peer's log keeps what its first life recorded."""
 
-    def __init__(self, path: str | Path | None = None) -> None:
+    def __init__(self, path: str | Path | None = None, *, append: bool = False) -> None:
         self.path = None if path is None else Path(path)
         self.counts: dict[str, int] = {}
-        self.last: dict[tuple[str, str], Message] = {}
-        self._file = None
+        self.last: dict[str, Message] = {}
+        self.lost = 0  # lines the disk refused
+        self.failure: str | None = None  # why the first of them was refused
+        self._fd: int | None = None
+        self._size = 0
         if self.path is not None:
             self.path.parent.mkdir(parents=True, exist_ok=True)
-            self._file = open(self.path, "w", encoding="utf-8")  # noqa: SIM115 (open for the log's lifetime)
+            mode = os.O_WRONLY | os.O_CREAT | (os.O_APPEND if append else os.O_TRUNC)
+            self._fd = os.open(self.path, mode, 0o644)
+            self._size = os.fstat(self._fd).st_size
 
     def sent(self, t: float, sender: str, key: str, message: Message) -> None:
-        self.last[(sender, key)] = message
+        self.last[key] = message
         self._write({"event": "sent", "t": t, "sender": sender, "key": key, "message": msgspec.to_builtins(message)})
 
     def received(self, t: float, sender: str, receiver: str, key: str, seq: int | None = None) -> None:
@@ -58,20 +71,40 @@ class EventLog:
             }
         )
 
-    def note(self, t: float, what: str, **fields) -> None:
-        self._write({"event": what, "t": t, **fields})
+    def note(self, t: float, event: str, /, **fields) -> None:
+        self._write({"event": event, "t": t, **fields})
 
     def close(self) -> None:
-        if self._file is not None:
-            self._file.close()
-            self._file = None
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+        if self.lost:
+            log.error("%s lost %d line(s) the disk refused: %s", self.path, self.lost, self.failure)
 
     def _write(self, record: dict) -> None:
         event = record["event"] if record["event"] != "impaired" else f"impaired:{record['action']}"
         self.counts[event] = self.counts.get(event, 0) + 1
-        if self._file is not None:
-            self._file.write(json.dumps(record, separators=(",", ":")) + "\n")
-            self._file.flush()
+        if self._fd is None:
+            return
+        line = (json.dumps(record, separators=(",", ":")) + "\n").encode()
+        try:
+            written = os.write(self._fd, line)
+            if written < len(line):
+                raise OSError(f"only {written} of {len(line)} bytes written")
+            self._size += written
+        except OSError as exc:
+            self._refused(exc)
+
+    def _refused(self, exc: OSError) -> None:
+        """Cut the file back to its last whole line and count the loss."""
+        try:
+            os.ftruncate(self._fd, self._size)
+        except OSError:
+            pass
+        self.lost += 1
+        if self.failure is None:
+            self.failure = str(exc)
+            log.error("%s: a line could not be written (%s); the game goes on, and losses are counted", self.path, exc)
 
 
 def read_events(path: str | Path) -> list[dict]:

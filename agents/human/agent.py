@@ -87,6 +87,11 @@ class HumanAgent:
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         return []
 
+    @property
+    def going(self) -> bool:
+        """Whether the behaviour has committed to its run (a fake-out's go, a go-no-go's go)."""
+        return any(getattr(self.behaviour, mark, None) is not None for mark in ("went_at", "committed_at"))
+
     def resume(self, truth: Truth) -> None:
         """Stand where ``truth``, the last this walker reported before its peer
         went down, says: a person does not go back to the start when the
@@ -97,7 +102,7 @@ class HumanAgent:
         position, heading = self.walker.position, self.walker.heading
         lat, lon = self.walker.map.to_geodetic(position[0], position[1])
         bearing = None if heading is None else compass_degrees(heading)
-        truth = Truth(agent=self.name, t=now, lat=lat, lon=lon, heading=bearing)
+        truth = Truth(agent=self.name, t=now, lat=lat, lon=lon, heading=bearing, going=self.going)
         out = [Send(keys.truth(self.game, self.name), truth)]
         fix = self.phone.fix(now, np.array(position), heading)
         if fix is not None:

@@ -6,7 +6,9 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from bearcat import arguments
+from bearcat.scenarios.faults import load_faults
 from bearcat.scenarios.peers import NETWORKS
+from bearcat.scenarios.run_directory import fresh
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
 from bearcat.solve_ahead import solve_ahead
 from bearcat.writing import make_directory, writing
@@ -19,7 +21,12 @@ def register(subparsers) -> None:
         "for all of them, start the game, and stop every peer when it ends (or on Ctrl-C, or when a peer dies).",
     )
     run.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
-    run.add_argument("--out", type=Path, metavar="DIR", help="run directory (default ./runs/SCENARIO-SEED)")
+    run.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="run directory (default ./runs/SCENARIO-SEED; DIR-1, DIR-2, ... if it holds something already)",
+    )
     run.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
     run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
     run.add_argument(
@@ -33,6 +40,12 @@ def register(subparsers) -> None:
         "--transport",
         choices=TRANSPORTS,
         help="how fixes and guidance travel: tcp (retransmitted, late) or udp (lost); default: the scenario's",
+    )
+    run.add_argument(
+        "--faults",
+        type=Path,
+        metavar="FILE",
+        help="a fault plan ([[fault]] tables) to apply instead of the scenario's own",
     )
     run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
@@ -116,6 +129,14 @@ def register(subparsers) -> None:
     )
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
     peer.add_argument(
+        "--faults", type=Path, metavar="FILE", help="the run's fault plan: apply the faults the launcher announces"
+    )
+    peer.add_argument(
+        "--resume",
+        action="store_true",
+        help="take up the game where this peer's log in --out DIR left it (a peer restarted mid-game)",
+    )
+    peer.add_argument(
         "--vehicle",
         metavar="URL",
         help="uav: MAVSDK URL of the vehicle, e.g. udpin://0.0.0.0:14540 (PX4 SITL, bearcat vehicle) "
@@ -142,9 +163,10 @@ def run_live(args) -> int:
         if (why := missing()) is not None:
             raise KernelError(why)
     scenario = load_scenario(args.scenario)
+    plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
     seed = scenario.seed if args.seed is None else args.seed
     netem = args.netem or scenario.netem
-    out = args.out or Path("runs") / f"{scenario.name}-{seed}"
+    out = fresh(args.out or Path("runs") / f"{scenario.name}-{seed}")
     make_directory(out, "run directory")
     solve_ahead(scenario, netem)
     with writing(out, "run directory"):
@@ -157,6 +179,7 @@ def run_live(args) -> int:
             transport=args.transport,
             network=args.network,
             say=lambda text: print(text, flush=True),
+            faults=plan,
         )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
@@ -208,6 +231,7 @@ def run_peer(args) -> int:
         scenario = load_scenario(args.scenario)
     if args.role == "ground-station":
         solve_ahead(scenario, args.netem or scenario.netem)
+    plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
     with nullcontext() if args.out is None else writing(args.out, "run directory"):
         reason = start_peer(
             args.role,
@@ -225,6 +249,8 @@ def run_peer(args) -> int:
             vehicle=args.vehicle,
             sysid=args.sysid,
             emulated=args.emulated,
+            faults=plan,
+            resume=args.resume,
         )
     print(f"peer {args.id if args.role != 'ground-station' else 'gs'}: {reason}", flush=True)
     return 0

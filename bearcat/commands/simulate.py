@@ -4,8 +4,10 @@ One trial per seed (``--seed`` for the first, then the next ones), each
 deterministic: the same seed gives the same game and the same event log. A
 line per trial and a tally go to stdout (``--json``: one JSON object per
 trial, then the tally, with the lines on stderr); ``--out DIR`` keeps each trial's run directory
-``DIR/seed-S/``: ``events.jsonl``, ``outcome.json``, ``map.geojson`` and
-the Rerun ``recording.rrd``.
+``DIR/seed-S/``: ``events.jsonl``, ``outcome.json``, ``scenario.toml``,
+``map.geojson`` and the Rerun ``recording.rrd`` (a ``DIR`` that holds
+something already is left alone: the runs go to ``DIR-1``, ...).
+``--faults FILE`` applies a fault plan, in virtual time.
 """
 
 from __future__ import annotations
@@ -19,6 +21,8 @@ from pathlib import Path
 from bearcat import arguments
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.output import Output
+from bearcat.scenarios.faults import load_faults
+from bearcat.scenarios.run_directory import fresh, write_scenario
 from bearcat.scenarios.schema import TRANSPORTS, list_scenarios, load_scenario
 from bearcat.scenarios.simulate import simulate
 from bearcat.solve_ahead import solve_ahead
@@ -40,7 +44,18 @@ def register(subparsers) -> None:
         choices=TRANSPORTS,
         help="how fixes and guidance travel: tcp (retransmitted, late) or udp (lost); default: the scenario's",
     )
-    p.add_argument("--out", type=Path, metavar="DIR", help="keep each trial's event log and outcome here")
+    p.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="keep each trial's event log and outcome here (DIR-1, DIR-2, ... if DIR holds something already)",
+    )
+    p.add_argument(
+        "--faults",
+        type=Path,
+        metavar="FILE",
+        help="a fault plan ([[fault]] tables) to apply instead of the scenario's own",
+    )
     p.add_argument(
         "--json",
         action="store_true",
@@ -56,7 +71,9 @@ def run(args) -> int:
     first = scenario.seed if args.seed is None else args.seed
     arguments.check_seeds(first, args.trials)
     out = Output(args.json)
+    plan = None if args.faults is None else load_faults(args.faults, scenario)
     if args.out is not None:
+        args.out = fresh(args.out)
         make_directory(args.out, "run directory")
     solve_ahead(scenario, args.netem or scenario.netem)
     tally: Counter = Counter()
@@ -64,7 +81,12 @@ def run(args) -> int:
     for seed in range(first, first + args.trials):
         events = None if args.out is None else args.out / f"seed-{seed}" / "events.jsonl"
         with nullcontext() if args.out is None else writing(args.out, "run directory"):
-            outcome = simulate(scenario, seed=seed, netem=args.netem, transport=args.transport, events=events)
+            if events is not None:
+                events.parent.mkdir()
+                write_scenario(events.parent, scenario)
+            outcome = simulate(
+                scenario, seed=seed, netem=args.netem, transport=args.transport, events=events, faults=plan
+            )
             record = asdict(outcome)
             if events is not None:
                 (events.parent / "outcome.json").write_text(json.dumps(record, indent=2) + "\n")

@@ -8,7 +8,11 @@ on its standard input; it answers each line on its standard output:
   is attached on ``IF``; its packets toward the router are queued on
   ``UP``, those toward it on ``DOWN``, each direction impaired on its own;
 - ``{"start": T}``: the game started at Unix time ``T``; outage windows
-  count from it.
+  count from it;
+- ``{"cut": [NAME, ...]}``: those peers' links drop every packet (a
+  partition or an outage), until ``{"heal": [NAME, ...]}`` (``null``: every
+  link), which also ends a degradation;
+- ``{"degrade": [NAME, ...], "profile": P}``: those links follow profile ``P``.
 
 The end of its standard input (the launcher closed it, or died) ends the
 hub, which writes what it did per link to the file given with ``--report``.
@@ -52,6 +56,7 @@ class Hub:
         self.seed = seed
         self.epoch: float | None = None
         self.directions: dict[int, Direction] = {}
+        self.links: dict[str, tuple[Direction, Direction]] = {}
         self.queues = []
         self.held: list = []  # (release time, order, packet, is a copy)
         self.order = itertools.count()
@@ -62,14 +67,39 @@ class Hub:
         """Queue ``name``'s packets on ``up`` (toward the router) and ``down`` (toward it)."""
         from netfilterqueue import NetfilterQueue
 
+        pair = []
         for queue, match, sender, receiver in ((up, "-i", name, "hub"), (down, "-o", "hub", name)):
             state = LinkState(self.model, link_rng(self.seed, sender, receiver))
             self.directions[queue] = direction = Direction(f"{sender} -> {receiver}", state)
+            pair.append(direction)
             nfq = NetfilterQueue()
             nfq.bind(queue, lambda packet, d=direction: self._arrived(d, packet), max_len=QUEUE_LENGTH)
             self.queues.append(nfq)
             self.selector.register(nfq.get_fd(), selectors.EVENT_READ, nfq)
             run("iptables", "-t", "mangle", "-A", "FORWARD", match, iface, "-j", "NFQUEUE", "--queue-num", str(queue))
+        self.links[name] = (pair[0], pair[1])
+
+    def directions_of(self, names) -> list[Direction]:
+        """Both directions of each named link (names of peers without one are passed over)."""
+        chosen = self.links if names is None else {n: self.links[n] for n in names if n in self.links}
+        return [d for pair in chosen.values() for d in pair]
+
+    def cut(self, names) -> None:
+        for d in self.directions_of(names):
+            d.cut = True
+
+    def heal(self, names) -> None:
+        for d in self.directions_of(names):
+            d.cut = False
+            if d.own is not None:
+                d.state, d.own = d.own, None
+
+    def degrade(self, names, profile: str) -> None:
+        model = load_profile(profile).link
+        for d in self.directions_of(names):
+            d.own = d.own or d.state
+            sender, _, receiver = d.name.partition(" -> ")
+            d.state = LinkState(model, link_rng(self.seed + 1, sender, receiver))
 
     def _arrived(self, direction: Direction, packet) -> None:
         now = time.time()
@@ -140,8 +170,17 @@ def obey(hub: Hub, command: dict) -> dict:
         if "start" in command:
             hub.epoch = float(command["start"])
             return {"ok": "start"}
+        if "cut" in command:
+            hub.cut(command["cut"])
+            return {"ok": "cut"}
+        if "heal" in command:
+            hub.heal(command["heal"])
+            return {"ok": "heal"}
+        if "degrade" in command:
+            hub.degrade(command["degrade"], command["profile"])
+            return {"ok": "degrade"}
         return {"error": f"unknown command {command!r}"}
-    except (KernelError, OSError, ValueError, KeyError) as exc:
+    except (KernelError, OSError, ValueError, KeyError, ProfileError) as exc:
         return {"error": str(exc)}
 
 

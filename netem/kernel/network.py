@@ -31,6 +31,7 @@ import select
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -103,6 +104,7 @@ class KernelNetwork:
         # would otherwise take its end of the link with it, and the router's
         # goodbye over a delayed link would wait for an answer that never comes.
         self._held: list[int] = []
+        self._asking = threading.Lock()  # the launcher's fault thread asks too
 
     # ------------------------------------------------------------------ the run
 
@@ -196,6 +198,18 @@ class KernelNetwork:
         """The game started at Unix time ``t``: outage windows count from it."""
         self._ask({"start": t})
 
+    def cut(self, names) -> None:
+        """Drop every packet of the named peers' links (a partition, an outage)."""
+        self._ask({"cut": list(names)})
+
+    def heal(self, names=None) -> None:
+        """End the cuts and degradations of the named links (None: of every link)."""
+        self._ask({"heal": None if names is None else list(names)})
+
+    def degrade(self, names, profile: str) -> None:
+        """The named links follow ``profile`` until healed."""
+        self._ask({"degrade": list(names), "profile": profile})
+
     def close(self) -> None:
         while self._held:
             os.close(self._held.pop())
@@ -264,9 +278,10 @@ class KernelNetwork:
         raise KernelError(f"peer {name} never got a network namespace of its own (unshare --net failed?)")
 
     def _ask(self, command: dict) -> dict:
-        self.hub.stdin.write((json.dumps(command) + "\n").encode())
-        self.hub.stdin.flush()
-        return self._reply()
+        with self._asking:
+            self.hub.stdin.write((json.dumps(command) + "\n").encode())
+            self.hub.stdin.flush()
+            return self._reply()
 
     def _reply(self) -> dict:
         ready, _, _ = select.select([self.hub.stdout], [], [], STARTUP)

@@ -24,9 +24,14 @@ class Direction:
     state: LinkState
     counts: dict[str, int] = field(default_factory=dict)
     delays: deque = field(default_factory=lambda: deque(maxlen=100_000))  # s, the latest packets'
+    cut: bool = False  # a partition or an outage: every packet is dropped
+    own: LinkState | None = None  # the link's own state while a degradation stands in for it
 
     def schedule(self, now: float, size: int, game_time: float | None) -> list[float]:
         """The times (on ``now``'s clock) the packet's copies leave: none if it is lost, two if duplicated."""
+        if self.cut:
+            self._count("partition")
+            return []
         fate = self.state.carry(now, size, way="packet", game_time=game_time)
         if fate.lost is not None:
             self._count(fate.lost)

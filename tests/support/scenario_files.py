@@ -10,6 +10,7 @@ game = "ctf"
 time_limit = {time_limit}
 netem = "{netem}"
 seed = 3
+lease = {lease}
 
 [rules]
 capture_radius = 2.5
@@ -49,6 +50,7 @@ def scenario_text(
     defender_behaviour="direct",
     defender_aided=False,
     robust=False,
+    lease=10.0,
 ) -> str:
     return SCENARIO.format(
         name=name,
@@ -60,6 +62,7 @@ def scenario_text(
         defender_behaviour=defender_behaviour,
         defender_aided=str(defender_aided).lower(),
         robust=str(robust).lower(),
+        lease=lease,
     )
 
 

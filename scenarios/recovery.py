@@ -1,0 +1,47 @@
+"""A peer restarted mid-game takes up where its last self left off.
+
+What each agent needs is what it last sent: a walker its last true
+position (a person does not go back to the start when the phone's app
+restarts), the referee its last state (the phase, the game clock, who holds
+the flag, who was caught). The simulated injector finds those in the run's
+event log as it is being written; a live peer restarted with ``--resume``
+reads them from its own log in the run directory.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import msgspec
+
+from bearcat.agents.ground_station.event_log import read_events
+from bearcat.bus import keys
+from bearcat.bus.messages import AnyMessage, GameState, Message, Truth
+
+
+def resume(agent, last: Mapping[str, Message], game: str) -> None:
+    """Hand ``agent`` what was last sent on its keys (``last``: key -> message), if it takes any."""
+    if hasattr(agent, "walker"):
+        truth = last.get(keys.truth(game, agent.name))
+        if isinstance(truth, Truth):
+            agent.resume(truth)
+    elif hasattr(agent, "resume"):
+        state = last.get(keys.state(game))
+        if isinstance(state, GameState):
+            agent.resume(state)
+
+
+def last_sent(path: str | Path) -> dict[str, Message]:
+    """The latest message sent on each key, from a peer's event log at ``path`` (empty if there is none)."""
+    path = Path(path)
+    if not path.exists():
+        return {}
+    found: dict[str, Message] = {}
+    for event in read_events(path):
+        if event.get("event") == "sent":
+            try:
+                found[event["key"]] = msgspec.convert(event["message"], AnyMessage)
+            except (msgspec.ValidationError, KeyError):
+                continue
+    return found
