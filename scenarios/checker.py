@@ -15,7 +15,7 @@ broken, or does not apply to the run (``None``), with one line of evidence:
 - ``detection``: a killed or stopped peer seen gone within ``KILL_SEEN`` s;
   a pause, outage or partition that outlasted the lease seen within the
   lease and ``SLACK`` s, and the peer back within ``REJOIN`` s of its end;
-  guidance flowing again within ``REJOIN`` s of a heal;
+  a player cut off gets guidance again within ``REJOIN`` s of the heal;
 - ``failsafe``: a UAV whose ground station vanished applied its failsafe
   within its ``link_timeout``;
 - ``leftovers``: no process still runs from the run.
@@ -41,7 +41,7 @@ SLACK = 2.0  # s past the lease for a silent peer to be declared gone
 REJOIN = 10.0  # s for a peer to be seen again after its fault ends
 RELIABLE_KINDS = ("state", "control", "task")
 IN_FLIGHT = 2.0  # s before its receiver's last record a message must have arrived by
-ENDINGS = ("peer ",)
+ENDINGS = ("peer ", "vehicle ")
 INVARIANTS = ("logs", "reliable", "verdict", "detection", "failsafe", "leftovers")
 DETECTABLE = ("kill", "stop", "restart", "pause", "partition", "outage")
 
@@ -129,7 +129,7 @@ def _logs(run: Run) -> Finding:
         problems.append("outcome.json is missing or unreadable")
     for log in sorted((run.directory / "peers").glob("*.log")):
         lines = [line for line in log.read_text(errors="replace").splitlines() if line.strip()]
-        if not lines or not any(lines[-1].startswith(e) or e in lines[-1] for e in ENDINGS):
+        if not lines or not lines[-1].startswith(ENDINGS):
             last = lines[-1][:80] if lines else "nothing"
             problems.append(f"peers/{log.name} does not say how the peer ended (its last line: {last!r})")
         elif any(line.startswith("Traceback") for line in lines):
@@ -232,10 +232,10 @@ def _detection(run: Run) -> Finding:
             else:
                 said.append(f"{kind} {peers[0]} seen gone after {seen - t:.2f} s")
         lasted = _lasted(run, fault)
-        if kind in ("outage", "partition") and run.live and not run.kernel:
-            said.append(f"{kind} on the shim: its messages were cut, but no session could notice (n/a)")
-            continue
-        if kind in ("pause", "outage", "partition") and lasted is not None and lasted >= lease:
+        on_shim = kind in ("outage", "partition") and run.live and not run.kernel
+        if on_shim:
+            said.append(f"{kind} on the shim: its messages were cut, but no session could notice")
+        elif kind in ("pause", "outage", "partition") and lasted is not None and lasted >= lease:
             watched = [p for p in peers if p != "gs"] or peers
             seen = _first(run, watched[0], "gone", t)
             if seen is None or seen - t > lease + SLACK:
@@ -245,14 +245,23 @@ def _detection(run: Run) -> Finding:
         end = run.ended.get(fault["fault"])
         if kind in ("pause", "outage", "partition", "restart") and end is not None and peers:
             watched = [p for p in peers if p != "gs"] or peers
+            game_over = _game_end(run)
             gone = _first(run, watched[0], "gone", t)
             was_gone = gone is not None and gone <= end + SLACK
             back = _first(run, watched[0], "alive", end)
-            game_over = _game_end(run)
-            if was_gone and back is None and (game_over is None or game_over > end + REJOIN):
+            if on_shim:
+                pass
+            elif was_gone and back is None and (game_over is None or game_over > end + REJOIN):
                 broken.append(f"{watched[0]} not back within {REJOIN:g} s of the end of its {kind}")
             elif was_gone and back is not None:
                 said.append(f"{watched[0]} back {back - end:.1f} s after its {kind} ended")
+            if kind in ("outage", "partition"):
+                fresh = _guided(run, watched, end)
+                guided = [p for p in watched if _guided(run, [p], -math.inf) is not None]
+                if fresh is not None and fresh - end <= REJOIN:
+                    said.append(f"guided again {fresh - end:.1f} s after the heal")
+                elif guided and (game_over is None or game_over > end + REJOIN):
+                    broken.append(f"{guided[0]} got no guidance within {REJOIN:g} s of the heal")
     if broken:
         return Finding("detection", False, "; ".join(broken))
     return Finding("detection", True, "; ".join(said) or "no fault needed detecting")
@@ -298,12 +307,14 @@ def _leftovers(run: Run) -> Finding:
 def detected_after(directory: str | Path) -> dict[int, float]:
     """Seconds from each fault that takes a peer away to the launcher seeing it gone, by fault index."""
     run = Run(Path(directory))
+    lease = run.scenario.lease if run.scenario is not None else 10.0
     found = {}
     for fault in run.faults:
         peers = [p for p in fault.get("peers", []) if p != "gs"] or fault.get("peers", [])
         if fault["kind"] in DETECTABLE and peers:
             seen = _first(run, peers[0], "gone", fault["t"])
-            if seen is not None:
+            until = min(run.ended.get(fault["fault"], math.inf), fault["t"] + lease) + SLACK
+            if seen is not None and seen <= until:
                 found[fault["fault"]] = seen - fault["t"]
     return found
 
@@ -339,7 +350,8 @@ def _cut_off(run: Run, t: float, *peers: str) -> bool:
 
 
 def _lasted(run: Run, fault: dict) -> float | None:
-    end = run.ended.get(fault["fault"])
+    """How long a fault held: to its end, or to the end of the game if it outlived it."""
+    end = run.ended.get(fault["fault"], _game_end(run))
     return None if end is None else end - fault["t"]
 
 
@@ -352,6 +364,16 @@ def _first(run: Run, peer: str, what: str, after: float) -> float | None:
         if e["event"] == what and owner == peer and e["t"] >= after - 1e-9:
             return e["t"]
     return None
+
+
+def _guided(run: Run, peers: list[str], after: float) -> float | None:
+    """When one of ``peers`` first received guidance from ``after`` on."""
+    times = [
+        e["t"]
+        for e in run.records()
+        if e["event"] == "received" and e["receiver"] in peers and _kind(e["key"]) == "guidance" and e["t"] >= after
+    ]
+    return min(times, default=None)
 
 
 def _game_end(run: Run) -> float | None:

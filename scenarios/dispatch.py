@@ -12,6 +12,10 @@ agent, recorded as a ``failed`` event (the agent, the key it was handling or
 traceback the first time and every hundredth after, so a tick that always
 fails cannot flood the log. Nothing is sent for the call that failed.
 
+What one sender puts on one key is held to a budget per receiving agent
+(``bus.budget``): a flood is dropped before it is decoded, and said once a
+second in the event log (``over-budget``), so it cannot fill the disk.
+
 What an agent did on its own and keeps in its ``events`` list (a UAV's
 failsafe, its landing) is recorded as ``did`` events, as it happens.
 
@@ -27,6 +31,7 @@ from collections.abc import Callable
 
 from bearcat.agents.protocol import Agent, Send
 from bearcat.bus import keys
+from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Message
 
@@ -48,11 +53,13 @@ class Dispatcher:
         self._sessions: dict[str, object] = {}
         self._inboxes: dict[str, Inbox] = {}
         self._told: dict[str, int] = {}  # agent -> how many of its events are recorded
+        self._budgets: dict[str, SenderBudget] = {}
 
     def attach(self, agent: Agent, session) -> None:
         """Drive ``agent`` on ``session`` (peers that run several agents share one)."""
         self._sessions[agent.name] = session
         self._inboxes[agent.name] = Inbox(agent.name)
+        self._budgets[agent.name] = SenderBudget()
         self._told[agent.name] = 0
 
     def session_of(self, name: str):
@@ -80,6 +87,12 @@ class Dispatcher:
     def receive(self, agent: Agent, key: str, payload: bytes, sender: str) -> Message | None:
         """Hand what arrived on ``key`` to ``agent``; the decoded message, None if refused."""
         now = self.now()
+        budget = self._budgets[agent.name]
+        if not budget.allow(sender, key, now):
+            self._inboxes[agent.name].drops["over budget"] += 1
+            for (who, where), n in budget.news(now).items():
+                self.record.note(now, "over-budget", sender=who, receiver=agent.name, key=where, dropped=n)
+            return None
         message = self._inboxes[agent.name].accept(key, payload)
         if message is None:
             self.record.refused(now, sender, agent.name, key, "undecodable or wrong for its key")

@@ -44,6 +44,7 @@ from pathlib import Path
 from bearcat.agents.ground_station.event_log import EventLog, read_events
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
+from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
@@ -58,6 +59,7 @@ from bearcat.scenarios.small_disk import SmallDisk
 log = logging.getLogger(__name__)
 
 GROUND = "gs"
+ENDING = ("peer ", "vehicle ")  # how the last line of a peer's or a vehicle's log starts
 STARTUP = 60.0  # s for every peer to come up
 GRACE = 5.0  # s past the time limit before the launcher stops a game itself
 STOP_WAIT = 5.0  # s a peer gets to exit after the stop command, and again after SIGTERM
@@ -165,8 +167,9 @@ def launch(
             startup=startup,
             fill=None if disk is None else disk.fill,
         )
-    if not (out / "outcome.json").exists():  # the full disk is gone with its fault
-        (out / "outcome.json").write_text(json.dumps(vars(outcome), indent=2) + "\n")
+    if full is not None:  # the disk is back: say what the full one could not take
+        _rewrite_outcome(out, outcome)
+    _say_how_they_ended(out / "peers", outcome.peers)
     try:
         finish_run(out, scenario)
     except OSError as exc:
@@ -199,6 +202,7 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
         (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
         inbox = Inbox("launcher")
+        budget = SenderBudget()
         final: dict = {}
         alive: set[str] = set()
         lock = threading.Lock()
@@ -206,8 +210,13 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
         injector: LiveFaults | None = None
 
         def seen(key, payload, sender):
-            message = inbox.accept(key, payload)
             now = time.time()
+            with lock:
+                if not budget.allow(sender, key, now):
+                    for (who, where), n in budget.news(now).items():
+                        record.note(now, "over-budget", sender=who, receiver="launcher", key=where, dropped=n)
+                    return
+            message = inbox.accept(key, payload)
             with lock:
                 if message is None:
                     record.refused(now, sender, "launcher", key, "undecodable or wrong for its key")
@@ -314,7 +323,6 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
             if injector is not None:
                 injector.close()
             codes = _stop_all(session, game, children, final, lock, reason)
-            _say_how_they_ended(out / "peers", codes)
             state = final.get("state")
             outcome = LiveOutcome(
                 scenario=game,
@@ -344,11 +352,27 @@ def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:
 
 
 def _say_how_they_ended(peers: Path, codes: dict[str, int | None]) -> None:
-    """A peer killed by a signal cannot say how it ended: its log says it for it."""
+    """A peer killed by a signal, or whose disk was full, could not say how it
+    ended: the launcher says it in its log, from its exit code."""
     for name, code in codes.items():
-        if code is not None and code < 0:
-            with open(peers / f"{name}.log", "a", encoding="utf-8") as log_file:
-                log_file.write(f"peer {name}: killed by signal {-code}\n")
+        log_path = peers / f"{name}.log"
+        lines = log_path.read_text(errors="replace").splitlines() if log_path.exists() else []
+        if lines and lines[-1].startswith(ENDING):
+            continue
+        how = f"killed by signal {-code}" if code is not None and code < 0 else f"exited with code {code}"
+        if code is not None and code >= 0:
+            how += " without a word (its log could not be written)"
+        with open(log_path, "a", encoding="utf-8") as log_file:
+            log_file.write(f"peer {name}: {how}\n")
+
+
+def _rewrite_outcome(out: Path, outcome: LiveOutcome) -> None:
+    """Write the outcome again where a full disk left it empty or cut short."""
+    path = out / "outcome.json"
+    try:
+        json.loads(path.read_text())
+    except (OSError, ValueError):
+        path.write_text(json.dumps(vars(outcome), indent=2) + "\n")
 
 
 def agent_failures(peers: Path) -> dict[str, int]:

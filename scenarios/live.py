@@ -21,8 +21,11 @@ GPS lies. Only the launcher announces faults.
 from __future__ import annotations
 
 import asyncio
+import concurrent.futures
 import logging
 import signal
+import threading
+import time
 from contextlib import closing
 
 from bearcat.agents.ground_station.event_log import EventLog
@@ -39,6 +42,7 @@ log = logging.getLogger(__name__)
 
 LINGER = 1.0  # s a peer stays up after the game ended
 POLL = 0.1
+SHUTDOWN_WAIT = 2.0  # s a UAV peer waits, on its way out, for a vehicle that does not answer
 
 
 async def run_peer(
@@ -88,6 +92,10 @@ async def run_peer(
 
         return handle, arrived
 
+    def watched(agent, key, alive) -> None:
+        if not session.closed:  # tokens vanish as the peer's own session closes
+            dispatch.peer(agent, key, alive)
+
     def soon(fn, *args) -> None:
         """Hand a sample from Zenoh's thread to the loop; samples that arrive
         while the peer shuts down are dropped."""
@@ -104,7 +112,7 @@ async def run_peer(
         for expr in agent.subscriptions:
             session.subscribe(expr, lambda k, p, s, arrived=arrived: soon(arrived, k, p, s))
         for expr in agent.watches:
-            session.subscribe_liveliness(expr, lambda k, alive, a=agent: soon(dispatch.peer, a, k, alive))
+            session.subscribe_liveliness(expr, lambda k, alive, a=agent: soon(watched, a, k, alive))
 
     def on_notice(key, payload, sender):
         notice = notices.accept(key, payload)
@@ -327,7 +335,46 @@ def start_peer(
             network=network,
             lease=scenario.lease,
         )
-        return asyncio.run(peer if autopilot is None else _fly(autopilot, peer))
+        if autopilot is None:
+            return asyncio.run(peer)
+        with asyncio.Runner() as runner:
+            # MAVSDK's commands block a thread until the vehicle answers; one
+            # that never will (its vehicle died) must not keep the peer alive.
+            runner.get_loop().set_default_executor(DaemonExecutor())
+            return runner.run(_fly(autopilot, peer))
+
+
+class DaemonExecutor(concurrent.futures.ThreadPoolExecutor):
+    """Runs each call on a daemon thread of its own and, shutting down,
+    waits for them a moment (``SHUTDOWN_WAIT``) and no longer: a call stuck
+    in a library waiting for a vehicle that is gone is left behind, and dies
+    with the process."""
+
+    def __init__(self) -> None:
+        super().__init__(max_workers=1)  # asyncio takes no other kind; none of its workers ever starts
+        self._daemons: list[threading.Thread] = []
+
+    def submit(self, fn, /, *args, **kwargs):
+        future = concurrent.futures.Future()
+
+        def run():
+            if not future.set_running_or_notify_cancel():
+                return
+            try:
+                future.set_result(fn(*args, **kwargs))
+            except BaseException as exc:
+                future.set_exception(exc)
+
+        thread = threading.Thread(target=run, daemon=True, name="mavsdk-call")
+        self._daemons = [t for t in self._daemons if t.is_alive()] + [thread]
+        thread.start()
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        if wait:
+            end = time.monotonic() + SHUTDOWN_WAIT
+            for thread in self._daemons:
+                thread.join(timeout=max(end - time.monotonic(), 0.0))
 
 
 async def _fly(autopilot, peer) -> str:

@@ -68,7 +68,8 @@ class LiveFaults:
         self._cgroups: dict[int, Path] = {}
         self._paused: dict[int, list[int]] = {}
         self._returning: list[str] = []  # peers due to start again
-        self._stop = threading.Event()
+        self._open_cuts: list[tuple[int, Fault]] = []  # partitions and outages that last until healed
+        self._halt = threading.Event()
         self._thread = threading.Thread(target=self._run, name="faults", daemon=True)
 
     # ------------------------------------------------------------------ the launcher's calls
@@ -96,7 +97,7 @@ class LiveFaults:
 
     def close(self) -> None:
         """Undo what still holds: thaw the paused, free the starved, end every announced fault."""
-        self._stop.set()
+        self._halt.set()
         if self._thread.is_alive():
             self._thread.join(timeout=5.0)
         for k in list(self._paused):
@@ -115,7 +116,7 @@ class LiveFaults:
                 self.record.note(now, "happened", name=name)
 
     def _run(self) -> None:
-        while not self._stop.wait(TICK):
+        while not self._halt.wait(TICK):
             now = time.time()
             for k, fault in list(self._due):
                 origin = self.happened.get(fault.after)
@@ -215,6 +216,13 @@ class LiveFaults:
 
     def _announce(self, k, fault, now) -> None:
         end = None if fault.ends is None else now + fault.ends
+        if fault.kind == "partition" and end is None:
+            self._open_cuts.append((k, fault))
+        elif fault.kind == "heal":
+            for cut, _ in self._open_cuts:
+                with self.lock:
+                    self.record.note(now, "fault-end", fault=cut, kind="partition")
+            self._open_cuts.clear()
         notice = FaultNotice(fault=k, start=now, end=end)
         self.session.put(keys.fault(self.game), encode(notice))
         if self.network is not None and fault.kind in ("partition", "outage"):

@@ -193,9 +193,7 @@ def _simulate(case: Case, seed: int, out: Path) -> str:
 
 def _live(case: Case, seed: int, out: Path, network: str, say) -> str:
     from bearcat.scenarios.launch import launch
-    from bearcat.solve_ahead import solve_ahead
 
-    solve_ahead(case.scenario, case.netem or case.scenario.netem)
     outcome = launch(
         case.scenario,
         str((out / "scenario.toml").resolve()),

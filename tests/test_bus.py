@@ -298,3 +298,17 @@ def test_a_zenoh_session_closes_when_its_block_ends_even_by_an_exception():
 def test_a_bad_endpoint_is_named():
     with pytest.raises(BusError, match="localhost:7447"):
         config(connect=["localhost:7447"])
+
+
+def test_a_sender_over_its_budget_gets_the_burst_then_the_rate_and_is_said_once_a_second():
+    from bearcat.bus.budget import SenderBudget
+
+    budget = SenderBudget(rate=100.0, burst=500.0)
+    passed = sum(budget.allow("vandal", "k", k * 1e-4) for k in range(30_000))  # 10 kHz for 3 s
+    assert 500 + 100 * 3 - 2 <= passed <= 500 + 100 * 3 + 2
+    assert budget.allow("honest", "k", 3.0)  # another sender has a budget of its own
+    assert budget.over[("vandal", "k")] == 30_000 - passed
+    said = budget.news(3.0)
+    assert said == {("vandal", "k"): 30_000 - passed} and budget.news(3.5) == {}
+    steady = sum(budget.allow("phone", "fix", 10.0 + k / 50.0) for k in range(5_000))  # 50 Hz for 100 s
+    assert steady == 5_000  # a legitimate stream never goes over

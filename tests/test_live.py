@@ -72,9 +72,20 @@ def game_started(out):
 
 
 def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path, env):
+    from bearcat.scenarios.checker import check_run
+
     launcher, out, path = start_run(tmp_path, env, time_limit=6.0)
     output, _ = launcher.communicate(timeout=180)
     assert launcher.returncode == 0, output
+    findings = {f.name: f.held for f in check_run(out)}
+    assert findings == {
+        "logs": True,
+        "reliable": True,
+        "verdict": True,
+        "detection": None,
+        "failsafe": None,
+        "leftovers": True,
+    }
     outcome = json.loads((out / "outcome.json").read_text())
     assert outcome["ended"] and outcome["winner"] in ("attacker", "defender"), outcome
     assert all(code == 0 for code in outcome["peers"].values()), outcome["peers"]
@@ -154,6 +165,37 @@ def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_pa
     for name in ("gs", "attacker", "defender"):
         refused += sum(1 for e in read_events(out / "peers" / f"{name}.jsonl") if e["event"] == "refused")
     assert refused > 100
+
+
+def test_a_flood_on_one_key_costs_its_receivers_a_budget_not_their_disk(tmp_path, env):
+    """Twenty thousand messages a second on the defender's fix key: each
+    receiver lets through what one sender may cost, drops the rest before
+    decoding it, says so once a second, and the game ends as it would."""
+    launcher, out, _path = start_run(tmp_path, env, time_limit=8.0, netem="ideal")
+    sent = 0
+    try:
+        assert wait_for(lambda: game_started(out), 120), "the game never started"
+        port = json.loads((out / "endpoint.json").read_text())["endpoint"]
+        with ZenohSession("vandal", config(connect=[port])) as vandal:
+            garbage = bytes(range(64))
+            end = time.monotonic() + 3.0
+            while time.monotonic() < end and sent < 60_000:
+                vandal.put(keys.fix("test-game", "defender"), garbage, reliable=False)
+                sent += 1
+        output, _ = launcher.communicate(timeout=120)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert outcome["ended"] and all(code == 0 for code in outcome["peers"].values()), output
+    assert sent > 5_000
+    gs = read_events(out / "peers" / "gs.jsonl")
+    refused = sum(1 for e in gs if e["event"] == "refused" and e["sender"] == "vandal")
+    over = sum(e["dropped"] for e in gs if e["event"] == "over-budget" and e["sender"] == "vandal")
+    assert refused <= 500 + 100 * 4  # the burst, then the rate, over the flood's three seconds and a margin
+    assert over > 0 and refused + over <= sent
+    launcher_refused = sum(1 for e in read_events(out / "events.jsonl") if e["event"] == "refused")
+    assert launcher_refused <= 500 + 100 * 4
 
 
 def test_a_peer_whose_agent_raises_records_and_counts_it_and_goes_on(tmp_path):
@@ -243,6 +285,39 @@ def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path, env):
         if launcher.poll() is None:
             launcher.kill()
     assert wait_for(lambda: peers_of(path) == [], 10)
+
+
+def test_a_walker_whose_ground_station_is_gone_for_a_lease_stops_by_itself_saying_why(tmp_path, env):
+    """Peers started by hand, with no launcher to stop them: the ground
+    station is killed, and the walker, with nobody to play for, leaves once
+    the lease is over."""
+    path = write_scenario(tmp_path, time_limit=120.0, netem="ideal", lease=3.0)
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    with ZenohSession("router", config(listen=[endpoint], mode="router")) as router:
+        common = ("--scenario", str(path), "--connect", endpoint, "--mode", "client")
+        gs = subprocess.Popen([sys.executable, "-m", "bearcat", "peer", "ground-station", *common], env=env)
+        walker = subprocess.Popen(
+            [sys.executable, "-m", "bearcat", "peer", "walker", "--id", "attacker", *common],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        try:
+            both = (keys.alive("test-game", "ground-station", "gs"), keys.alive("test-game", "walker", "attacker"))
+            assert wait_for(lambda: all(router.alive(k, timeout=0.5) for k in both), 120), "the peers never came up"
+            gs.kill()
+            gs.wait()
+            killed = time.monotonic()
+            output, _ = walker.communicate(timeout=30)
+            assert 3.0 <= time.monotonic() - killed < 3.0 + 5.0
+            assert walker.returncode == 0 and "the ground station has been gone for 3 s" in output, output
+        finally:
+            for p in (gs, walker):
+                if p.poll() is None:
+                    p.kill()
+                    p.wait()
 
 
 def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path, env):

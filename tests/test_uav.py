@@ -309,6 +309,32 @@ def test_mavsdk_client_arms_takes_off_flies_a_goto_and_lands(vehicle):
     assert "0 undecodable" in vehicle.stop()
 
 
+def test_a_goto_the_vehicle_refuses_on_the_ground_is_tried_again_until_it_holds(vehicle, monkeypatch):
+    """A task that reaches the UAV between arming and lift-off is refused
+    (the vehicle is still on the ground); it must be sent again, not dropped
+    with the UAV left hovering over its take-off point."""
+    from bearcat.agents.uav import autopilot as autopilots
+
+    monkeypatch.setattr(autopilots, "TAKE_OFF_WAIT", 0.0)  # send the goto at once, as a loaded machine would
+
+    async def scenario():
+        autopilot = MavsdkAutopilot(vehicle.url)
+        await autopilot.connect(timeout=10.0)
+        try:
+            agent = _agent(autopilot, link_timeout=60.0)
+            _start(agent)
+            agent.handle(keys.uav_task(GAME, "q1"), _task(1, 30.0, 20.0), time.monotonic())
+            await _fly(
+                agent, 30.0, until=lambda s: math.hypot(*to_local(s.lat, s.lon, HOME[:2])) > 35.5 and s.speed < 0.3
+            )
+            east, north = to_local(agent.state.lat, agent.state.lon, HOME[:2])
+            assert math.hypot(east - 30.0, north - 20.0) < 1.0
+        finally:
+            await autopilot.close()
+
+    asyncio.run(scenario())
+
+
 def test_mavsdk_client_steers_by_offboard_velocity_to_a_point(vehicle):
     async def scenario():
         autopilot = MavsdkAutopilot(vehicle.url)
@@ -489,3 +515,72 @@ def test_a_live_search_game_flies_the_uav_through_mavsdk_and_leaves_no_process(t
     assert (out / "recording.rrd").exists()
     left = subprocess.run(["pgrep", "-f", str(path)], capture_output=True, text=True).stdout.split()
     assert left == []
+
+
+def test_a_uav_peer_whose_vehicle_died_still_stops_when_told(tmp_path):
+    """The launcher's stop reaches a UAV peer whose vehicle emulator died
+    mid-flight: the landing it sends can never be answered, and the peer
+    must exit anyway, within seconds, not wait to be killed."""
+    import signal
+    import socket
+    import subprocess
+    import sys
+
+    from bearcat.bus.codec import encode
+    from bearcat.bus.zenoh_session import ZenohSession, config
+
+    def free(kind):
+        with socket.socket(socket.AF_INET, kind) as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    port, vport = free(socket.SOCK_STREAM), free(socket.SOCK_DGRAM)
+    with ZenohSession("launcher", config(listen=[f"tcp/127.0.0.1:{port}"], mode="router")) as launcher:
+        vehicle = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "bearcat",
+                "vehicle",
+                "--connect",
+                f"udpout:127.0.0.1:{vport}",
+                "--home",
+                "37.87,-122.26,0",
+            ]
+        )
+        peer = subprocess.Popen(
+            [
+                *(sys.executable, "-m", "bearcat", "peer", "uav", "--scenario", "search", "--id", "q1"),
+                *("--connect", f"tcp/127.0.0.1:{port}", "--mode", "client"),
+                *("--vehicle", f"udpin://0.0.0.0:{vport}", "--sysid", "1", "--emulated"),
+            ],
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        try:
+            assert launcher.alive(keys.alive("search", "uav", "q1"), timeout=1.0) or _wait_alive(launcher, 30.0)
+            launcher.put(keys.control("search"), encode(Control(t=time.time(), command="start", seq=1)))
+            time.sleep(4.0)  # taking off
+            vehicle.kill()
+            vehicle.wait()
+            time.sleep(1.0)
+            launcher.put(keys.control("search"), encode(Control(t=time.time(), command="stop", seq=2)))
+            told = time.monotonic()
+            output, _ = peer.communicate(timeout=20)
+            assert time.monotonic() - told < 8.0, output
+            assert peer.returncode == 0 and "peer q1: stopped by the launcher" in output, output
+        finally:
+            for p in (peer, vehicle):
+                if p.poll() is None:
+                    p.send_signal(signal.SIGKILL)
+                    p.wait()
+
+
+def _wait_alive(session, seconds: float) -> bool:
+    end = time.monotonic() + seconds
+    while time.monotonic() < end:
+        if session.alive(keys.alive("search", "uav", "q1"), timeout=0.5):
+            return True
+        time.sleep(0.2)
+    return False

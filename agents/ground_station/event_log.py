@@ -16,6 +16,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+from collections.abc import Iterator
 from pathlib import Path
 
 import msgspec
@@ -109,11 +110,14 @@ class EventLog:
 
 def read_events(path: str | Path) -> list[dict]:
     """The records of an event log (a torn last line, from a run that died mid-write, is skipped)."""
-    events = []
+    return list(iter_events(path))
+
+
+def iter_events(path: str | Path) -> Iterator[dict]:
+    """The records of an event log one by one, for logs too long to hold."""
     with open(path, encoding="utf-8") as f:
         for line in f:
             try:
-                events.append(json.loads(line))
+                yield json.loads(line)
             except json.JSONDecodeError:
-                break
-    return events
+                return

@@ -29,12 +29,13 @@ from __future__ import annotations
 
 import importlib.util
 import logging
+from collections import OrderedDict
 from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 
-from bearcat.agents.ground_station.event_log import read_events
+from bearcat.agents.ground_station.event_log import iter_events
 from bearcat.maps import Map
 
 log = logging.getLogger(__name__)
@@ -55,6 +56,7 @@ BUILDINGS = (70, 70, 70)
 REGIONS = (0, 170, 0)
 # The entity trees drawn on the map; each is mirrored north-south (see _north_up).
 FIELD_ROOTS = ("map", "ground", "phone")
+PENDING = 4096  # sent guidance and fixes the drawing remembers while they are in flight
 
 
 def finish_run(directory: str | Path, scenario) -> Path | None:
@@ -88,30 +90,38 @@ def write_recording(
     import rerun as rr
     import rerun.blueprint as rrb
 
-    events = read_events(events_path)
     rec = rr.RecordingStream(f"bearcat-{name}", recording_id=str(Path(events_path).resolve()))
-    start = min((e["t"] for e in events if "t" in e), default=0.0)
+    # A first pass for what the drawing needs up front, a second to draw: the
+    # log is read line by line twice, never held whole, however long the run.
+    start, flying, valued = None, set(), set()
+    for e in iter_events(events_path):
+        if "t" in e:
+            start = e["t"] if start is None else min(start, e["t"])
+        m = e.get("message") if e["event"] == "sent" else None
+        if m is not None and m["type"] in ("truth", "fix") and m.get("alt") is not None:
+            flying.add(m["agent"])  # only UAVs report an altitude
+        elif m is not None and m["type"] == "guidance" and m.get("value") is not None:
+            valued.add(m["agent"])
+    start = start or 0.0
     to_local = _converter(game_map)
-    sent = {}
-    for e in events:
-        if e["event"] == "sent":
-            m = e["message"]
-            sent[(e["key"], m.get("seq"))] = m
-    # Only UAVs report an altitude.
-    flying = {m["agent"] for m in sent.values() if m["type"] in ("truth", "fix") and m.get("alt") is not None}
     markers = _Markers(rr, game_map, teams or {}, flying)
     phones: list[str] = []
 
     for root in FIELD_ROOTS:
         rec.log(root, _north_up(rr), static=True)
     _log_map(rec, rr, game_map)
-    for agent in sorted({m["agent"] for m in sent.values() if m["type"] == "guidance" and m.get("value") is not None}):
+    for agent in sorted(valued):
         rec.log(f"game/value/{agent}", rr.SeriesLines(colors=[markers.colour(agent)], names=[agent]), static=True)
-    for e in events:
+    pending: OrderedDict = OrderedDict()  # guidance and fixes sent, until they arrive (the latest few thousand)
+    for e in iter_events(events_path):
         rec.set_time("game_time", duration=max(e["t"] - start, 0.0))
         kind = e["event"]
         if kind == "sent":
             m = e["message"]
+            if m["type"] in ("guidance", "fix"):
+                pending[(e["key"], m.get("seq"))] = m
+                if len(pending) > PENDING:
+                    pending.popitem(last=False)
             if m["type"] == "truth":
                 drawn = markers.draw([(m["agent"], to_local(m["lat"], m["lon"]))])
                 rec.log(f"ground/truth/{m['agent']}", drawn[markers.shape(m["agent"])])
@@ -140,7 +150,7 @@ def write_recording(
                     ),
                 )
         elif kind == "received":
-            m = sent.get((e["key"], e.get("seq")))
+            m = pending.get((e["key"], e.get("seq")))
             if m is None:
                 continue
             if m["type"] == "guidance":

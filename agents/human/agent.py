@@ -23,6 +23,7 @@ from bearcat.bus.messages import Control, GameState, Guidance, Message, Truth
 from bearcat.maps.geodesy import compass_degrees
 
 TICK = 0.1  # s: the body's integration step and decision rate
+FROZEN = 1.0  # s between ticks past which the peer itself stood still (paused, starved), and its body with it
 
 
 class HumanAgent:
@@ -75,7 +76,10 @@ class HumanAgent:
         return []
 
     def tick(self, now: float) -> list[Send]:
-        dt = now - (self._last if self._last is not None else now)
+        # A peer that stood still (a paused process) froze its body with it:
+        # on waking the body goes on from where it stood, not along a stale
+        # heading for the whole gap.
+        dt = min(now - (self._last if self._last is not None else now), FROZEN)
         self._last = now
         if dt > 0:
             self.walker.step(now - dt, dt)

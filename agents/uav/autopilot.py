@@ -27,6 +27,9 @@ from bearcat.maps.geodesy import bearing, to_geodetic, to_local
 
 log = logging.getLogger("bearcat.uav")
 TAKE_OFF_WAIT = 10.0  # s a reposition waits for a vehicle that was told to take off to leave the ground
+CLOSE_WAIT = 3.0  # s to let go of a vehicle
+RETRY_EVERY = 0.5  # s between tries of a command the vehicle refused
+RETRY_FOR = 60.0  # s a refused command is tried again, unless a newer one replaces it
 
 
 @dataclass(frozen=True)
@@ -173,14 +176,18 @@ class MavsdkAutopilot:
             await asyncio.sleep(0.1)
         return None
 
-    async def close(self) -> None:
+    async def close(self, timeout: float = CLOSE_WAIT) -> None:
+        """Let go of the vehicle, within ``timeout`` s: one that died does not answer."""
         for task in self._tasks:
             task.cancel()
         await asyncio.gather(*self._tasks, return_exceptions=True)
         self._tasks = []
         if self._mavsdk is not None:
-            await self._mavsdk.__aexit__(None, None, None)
-            self._mavsdk = None
+            mavsdk, self._mavsdk = self._mavsdk, None
+            try:
+                await asyncio.wait_for(asyncio.get_running_loop().run_in_executor(None, mavsdk.destroy), timeout)
+            except TimeoutError:
+                log.warning("%s: the vehicle's connection did not close within %g s; leaving it", self.url, timeout)
 
     def update(self, now: float) -> VehicleState | None:
         s = self._state
@@ -258,13 +265,26 @@ class MavsdkAutopilot:
         await self.action.goto_location(lat, lon, amsl, float("nan"))
 
     async def _work(self) -> None:
+        """Send the commands in order. One the vehicle refuses (a reposition
+        sent while it is still on the ground, a command lost on the link) is
+        tried again until it holds, a newer command replaces it, or
+        ``RETRY_FOR`` runs out: a refused goto must not leave the UAV
+        hovering for the rest of the game."""
+        loop = asyncio.get_running_loop()
         while True:
             what, call, args = await self._queue.get()
-            try:
-                await call(*args)
-            except Exception as error:  # the vehicle refused or did not answer
-                self.failure = f"{what} failed: {error}"
-                log.warning("%s: %s", self.url, self.failure)
+            give_up = loop.time() + RETRY_FOR
+            while True:
+                try:
+                    await call(*args)
+                    break
+                except Exception as error:  # the vehicle refused or did not answer
+                    if not self._queue.empty() or loop.time() > give_up or what == "offboard":
+                        self.failure = f"{what} failed: {error}"
+                        log.warning("%s: %s", self.url, self.failure)
+                        break
+                    log.info("%s: %s failed (%s); trying again", self.url, what, error)
+                    await asyncio.sleep(RETRY_EVERY)
 
     async def _follow(self, name: str) -> None:
         async for value in getattr(self.telemetry, "subscribe_" + name)():

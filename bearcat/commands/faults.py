@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import fnmatch
 import json
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 
@@ -40,6 +41,13 @@ def register(subparsers) -> None:
     p.add_argument(
         "--case", action="append", default=[], metavar="NAME", help="run only the cases matching NAME (a glob)"
     )
+    p.add_argument(
+        "--jobs",
+        type=int,
+        default=1,
+        metavar="N",
+        help="runs at once (default 1; live runs share the processor, and a loaded one stretches detection times)",
+    )
     p.set_defaults(run=run_suite)
 
 
@@ -61,23 +69,33 @@ def run_suite(args) -> int:
         cases = [c for c in cases if any(fnmatch.fnmatch(c.name, pattern) for pattern in args.case)]
         if not cases:
             raise UsageError(f"no case of suite {name} matches {', '.join(args.case)}")
+    if args.jobs < 1:
+        raise UsageError("--jobs must be at least 1")
     out = fresh(args.out or Path("runs") / f"faults-{name}")
     make_directory(out, "run directory")
-    results, skipped = [], []
+    skipped, todo = [], []
+    for case in cases:
+        why = refusal(case.faults, args.runtime)
+        if why is not None:
+            skipped.append({"case": case.name, "why": why})
+            print(f"{case.name}: skipped: {why}", flush=True)
+        else:
+            todo += [(case, seed) for seed in case.seeds]
+
+    def run(job):
+        case, seed = job
+        result = run_case(case, seed, out / case.name / f"seed-{seed}", runtime=args.runtime, network=args.network)
+        print(f"{case.name} seed {seed}: {'ok' if result.passed else 'FAILED'}: {result.outcome}", flush=True)
+        return result
+
     with writing(out, "run directory"):
-        for case in cases:
-            why = refusal(case.faults, args.runtime)
-            if why is not None:
-                skipped.append({"case": case.name, "why": why})
-                print(f"{case.name}: skipped: {why}", flush=True)
-                continue
-            for seed in case.seeds:
-                result = run_case(
-                    case, seed, out / case.name / f"seed-{seed}", runtime=args.runtime, network=args.network
-                )
-                results.append(result)
-                mark = "ok" if result.passed else "FAILED"
-                print(f"{case.name} seed {seed}: {mark}: {result.outcome}", flush=True)
+        if args.runtime == "live":  # solved before any game starts, once a game
+            from bearcat.solve_ahead import solve_ahead
+
+            for case in {case.name: case for case, _ in todo}.values():
+                solve_ahead(case.scenario, case.netem or case.scenario.netem)
+        with ThreadPoolExecutor(max_workers=args.jobs) as pool:
+            results = list(pool.map(run, todo))
         report = {
             "suite": name,
             "runtime": args.runtime,

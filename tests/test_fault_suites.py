@@ -1,0 +1,119 @@
+"""Fault-injection suites as a user runs them: the built-in suite in both
+runtimes, a suite of one's own from the README's example, and the pytest
+plugin's fixtures."""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from bearcat.cli import main
+from bearcat.scenarios.faults import KINDS, FaultError
+from bearcat.scenarios.suites import builtin_suite, load_suite
+
+
+def test_the_builtin_suite_covers_every_fault_kind_against_the_three_games():
+    _, cases = load_suite(builtin_suite())
+    kinds = {f.kind for case in cases for f in case.faults}
+    assert kinds == set(KINDS)
+    assert {case.scenario.name for case in cases} == {"fake-out", "go-no-go", "search"}
+
+
+def test_the_builtin_suite_holds_in_virtual_time(tmp_path, capsys):
+    assert main(["faults", "builtin", "--out", str(tmp_path / "sim")]) == 0
+    said = capsys.readouterr().out
+    report = json.loads((tmp_path / "sim" / "report.json").read_text())
+    assert report["passed"] and len(report["cases"]) == 9
+    assert {s["case"] for s in report["skipped"]} == {"fake-out-starved-and-full"}
+    assert "9 of 9 runs held every invariant they expect" in said
+    for case in report["cases"]:
+        assert (tmp_path / "sim" / case["case"] / "seed-0" / "events.jsonl").exists()
+
+
+def test_the_builtin_suite_holds_live(tmp_path):
+    """Every case, every peer its own process, the faults real signals, cgroups and a tmpfs."""
+    done = subprocess.run(
+        [
+            *(sys.executable, "-m", "bearcat", "faults", "builtin", "--runtime", "live"),
+            *("--jobs", "2", "--out", str(tmp_path / "live")),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    report = json.loads((tmp_path / "live" / "report.json").read_text())
+    assert report["passed"] and len(report["cases"]) == 10 and not report["skipped"]
+    assert "10 of 10 runs held every invariant they expect" in done.stdout
+
+
+@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("iptables") is None, reason="kernel mode needs root and iptables")
+def test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed(tmp_path):
+    done = subprocess.run(
+        [
+            *(sys.executable, "-m", "bearcat", "faults", "builtin", "--runtime", "live", "--network", "kernel"),
+            *("--case", "go-no-go-outage-of-the-defender", "--out", str(tmp_path / "kernel")),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert done.returncode == 0, done.stdout + done.stderr
+    (case,) = json.loads((tmp_path / "kernel" / "report.json").read_text())["cases"]
+    seen = float(case["detected"].split()[0])
+    assert 3.0 <= seen <= 3.0 + 2.0  # the lease, then the router's sweep: real packets, really dropped
+    assert f"outage defender seen gone after {seen:.1f} s (lease 3 s)" in case["evidence"]["detection"]
+
+
+README = (Path(__file__).resolve().parent.parent / "README.md").read_text()
+SUITE = re.search(r"\*\*Suites\.\*\*.*?```toml\n(.*?)```", README, flags=re.S).group(1)
+"""The README's example suite, as a user would copy it."""
+
+
+def test_a_suite_of_ones_own_runs_with_one_command_and_fails_when_an_expectation_does(tmp_path, capsys):
+    suite = tmp_path / "mine.toml"
+    suite.write_text(SUITE)
+    assert main(["faults", str(suite), "--out", str(tmp_path / "runs")]) == 0
+    said = capsys.readouterr().out
+    assert "defender-killed  0" in said and "defender-killed  1" in said and "2/2 held" in said
+    suite.write_text(SUITE.replace('expect = ["verdict", "detection"]', 'expect = ["verdict", "failsafe"]'))
+    assert main(["faults", str(suite), "--out", str(tmp_path / "runs")]) == 1  # no UAV: nothing to fail safe
+    assert "did not apply: failsafe" in capsys.readouterr().out
+    assert (tmp_path / "runs-1" / "report.json").exists()  # the first run's directory is left alone
+
+
+@pytest.mark.parametrize(
+    ("change", "said"),
+    [
+        (('expect = ["verdict", "detection"]', 'expect = ["verdikt"]'), "expect: 'verdikt' is not an invariant"),
+        (('scenario = "fake-out"', 'scenario = "fake-in"'), "case[0] (defender-killed): there is no scenario"),
+        (('target = "defender"', 'target = "nobody"'), "fault[0].target: there is no peer 'nobody'"),
+    ],
+)
+def test_a_bad_suite_is_one_sentence_naming_the_case(tmp_path, change, said):
+    suite = tmp_path / "mine.toml"
+    suite.write_text(SUITE.replace(*change))
+    with pytest.raises(
+        FaultError, match=said.replace("[", r"\[").replace("]", r"\]").replace("(", r"\(").replace(")", r"\)")
+    ):
+        load_suite(suite)
+
+
+def test_the_pytest_plugin_is_registered_and_its_fixtures_judge_a_run(pytestconfig, bearcat_simulate, bearcat_check):
+    assert pytestconfig.pluginmanager.hasplugin("bearcat")
+    run = bearcat_simulate(
+        "fake-out",
+        [{"kind": "restart", "target": "attacker", "at": 3.0}],
+        scenario__time_limit=12.0,
+        rules__grid=21,
+    )
+    run.assert_held()
+    assert run.held("leftovers") is None and run.outcome["faults"][0]["kind"] == "restart"
+    assert bearcat_check(run.directory).findings.keys() == run.findings.keys()
