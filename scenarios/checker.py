@@ -23,6 +23,7 @@ broken, or does not apply to the run (``None``), with one line of evidence:
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
 import os
@@ -419,7 +420,7 @@ def _truth(run: Run, until: float) -> dict[str, list[tuple[float, np.ndarray]]]:
 
 
 def _longest_step(points: list[tuple[float, np.ndarray]]) -> float:
-    return max((float(np.hypot(*(b - a))) for (_, a), (_, b) in zip(points, points[1:])), default=0.0)
+    return max((float(np.hypot(*(b - a))) for (_, a), (_, b) in itertools.pairwise(points)), default=0.0)
 
 
 def _closest(a: list[tuple[float, np.ndarray]], b: list[tuple[float, np.ndarray]]) -> float:

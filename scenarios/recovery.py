@@ -3,7 +3,7 @@
 What each agent needs is what it last sent: a walker its last true
 position (a person does not go back to the start when the phone's app
 restarts), the referee its last state (the phase, the game clock, who holds
-the flag, who was caught). The simulated injector finds those in the run's
+the flag, who was caught), the guidance the fixes it last showed. The simulated injector finds those in the run's
 event log as it is being written; a live peer restarted with ``--resume``
 reads them from its own log in the run directory.
 """
@@ -16,8 +16,9 @@ from pathlib import Path
 import msgspec
 
 from bearcat.agents.ground_station.event_log import read_events
+from bearcat.agents.ground_station.guidance.service import GuidanceService
 from bearcat.bus import keys
-from bearcat.bus.messages import AnyMessage, GameState, Message, Truth
+from bearcat.bus.messages import AnyMessage, GameState, Guidance, Message, Truth
 
 
 def resume(agent, last: Mapping[str, Message], game: str) -> None:
@@ -26,6 +27,8 @@ def resume(agent, last: Mapping[str, Message], game: str) -> None:
         truth = last.get(keys.truth(game, agent.name))
         if isinstance(truth, Truth):
             agent.resume(truth)
+    elif isinstance(agent, GuidanceService):
+        agent.resume(m for m in last.values() if isinstance(m, Guidance))
     elif hasattr(agent, "resume"):
         state = last.get(keys.state(game))
         if isinstance(state, GameState):

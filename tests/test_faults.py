@@ -163,6 +163,10 @@ def test_a_restarted_ground_station_resumes_the_game_clock_and_the_state_numbers
     running = [(s["t"], s["elapsed"]) for s in states if s["phase"] == "running"]
     assert all(abs((t - e) - running[0][0] + running[0][1]) < 0.11 for t, e in running)  # one clock, never reset
     assert [t for t, _ in running if 3.0 < t < 5.0] == []  # nobody referees while it is down
+    guidance = [(e["t"], e["message"]) for e in sent(events, "guidance")]
+    assert [m["seq"] for _, m in guidance] == sorted({m["seq"] for _, m in guidance})  # one count, never reset
+    shown = [{r["agent"] for r in m["reports"]} for t, m in guidance if t >= 5.0]
+    assert shown and all(agents == {"attacker", "defender"} for agents in shown)  # the last fixes, remembered
     assert outcome.ended and outcome.winner is not None
     held(findings)
 

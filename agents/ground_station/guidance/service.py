@@ -17,6 +17,8 @@ when one of its side's UAVs detected it; the agent a UAV saw is alerted
 
 from __future__ import annotations
 
+from collections.abc import Iterable
+
 import numpy as np
 
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes
@@ -94,6 +96,19 @@ class GuidanceService:
 
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         return []
+
+    def resume(self, sent: Iterable[Guidance]) -> None:
+        """Take up where the guidance ``sent`` before a restart left off: every
+        fix it showed, with the fix's own time (so its age, and the disk the
+        agent may be in, go on growing until a newer fix arrives), and its
+        count. A restarted ground station does not forget where everyone was."""
+        for guidance in sent:
+            self.seq = max(self.seq, guidance.seq)
+            for report in guidance.reports:
+                fix = Fix(agent=report.agent, seq=0, t=report.t, lat=report.lat, lon=report.lon)
+                self.fixes.take(fix)
+                if self.known is not None and guidance.agent in self.known:
+                    self.known[guidance.agent].take(fix)
 
     def tick(self, now: float) -> list[Send]:
         due = [a for a in self.agents if now - self._last[a] >= self.period - 1e-9]
