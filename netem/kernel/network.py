@@ -22,6 +22,7 @@ the route to the run's /24, which go when the hub's namespace does.
 
 from __future__ import annotations
 
+import contextlib
 import fcntl
 import ipaddress
 import json
@@ -100,6 +101,7 @@ class KernelNetwork:
         self.netem = False  # whether this kernel has the netem qdisc (the hub impairs packets either way)
         self._links = 0
         self._subnet: ipaddress.IPv4Network | None = None
+        self._veth: str | None = None  # the host's end of the link to the hub
         # Each peer's namespace held open until the end: a peer that exits
         # would otherwise take its end of the link with it, and the router's
         # goodbye over a delayed link would wait for an answer that never comes.
@@ -222,6 +224,13 @@ class KernelNetwork:
         except (OSError, subprocess.TimeoutExpired):
             hub.kill()
             hub.wait()
+        if self._veth is not None:
+            # The kernel tears a dead namespace down in the background: its
+            # end of the link (and the route through it) would outlive this
+            # call by a moment. Deleting the host's end is immediate.
+            veth, self._veth = self._veth, None
+            with contextlib.suppress(KernelError):
+                run("ip", "link", "del", veth)
 
     # ------------------------------------------------------------------ building
 
@@ -246,6 +255,7 @@ class KernelNetwork:
             self.netem = bool(ready.get("netem"))
             host, hub = self._address(0, 1), self._address(0, 2)
             veth = f"bcat{list(BLOCK.subnets(new_prefix=24)).index(self._subnet)}"
+            self._veth = veth
             run("ip", "link", "add", veth, "type", "veth", "peer", "name", "up0", "netns", str(self.hub.pid))
             run("ip", "addr", "add", f"{host}/30", "dev", veth)
             run("ip", "link", "set", veth, "up")
