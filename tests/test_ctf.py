@@ -7,6 +7,9 @@ defender never helping the attacker.
 Coordinates are read off the maps and grids, never typed in, so the tests
 hold wherever a map puts its flag and return strip."""
 
+import json
+import subprocess
+import sys
 import tracemalloc
 
 import numpy as np
@@ -525,3 +528,25 @@ def test_a_faster_defender_never_grows_the_attackers_flag_return_set(ctf10):
     faster = solve_ctf(ctf10, faster_rules, "return", scheme="first").sets["return"].attacker_wins
     assert (faster & ~base).sum() <= 0.001 * base.size
     assert (base & ~faster).sum() > 0.05 * base.size
+
+
+SOLVE_ONCE = """
+import json, sys
+from pathlib import Path
+from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve
+from bearcat.maps import load_map
+from bearcat.solvers.ctf import Rules
+rules = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.8, capture_time=12.0, return_time=12.0)
+solved = load_or_solve(CtfGame(load_map("ctf-10"), 21, rules, scheme="first"), "both", root=Path(sys.argv[1]))
+print(json.dumps(solved.sources))
+"""
+
+
+def test_processes_after_the_same_sets_solve_them_once_and_the_others_load_them(tmp_path):
+    solvers = [
+        subprocess.Popen([sys.executable, "-c", SOLVE_ONCE, str(tmp_path)], stdout=subprocess.PIPE, text=True)
+        for _ in range(3)
+    ]
+    sources = [json.loads(p.communicate(timeout=300)[0]) for p in solvers]
+    assert sorted(s["return"] for s in sources) == ["cache", "cache", "solved"]
+    assert sorted(s["win"] for s in sources) == ["cache", "cache", "solved"]

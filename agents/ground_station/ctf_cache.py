@@ -20,6 +20,8 @@ is solved again, since the cache holds nothing a new solve cannot restore.
 
 from __future__ import annotations
 
+import contextlib
+import fcntl
 import hashlib
 import json
 import logging
@@ -139,8 +141,42 @@ def load_or_solve(
     progress: ProgressCallback | None = None,
 ) -> Solved:
     """The sets of ``stages``, from the cache where present, solved (and
-    stored) where not."""
+    stored) where not. Processes after the same sets take turns (peers of
+    parallel runs, workers of a study): one solves, the others then load."""
     directory = (root or cache_root()) / "ctf"
+    if not use_cache:
+        return _load_or_solve(game, stages, directory, False, progress)
+    names = "-".join(game.set_key(name) for name in STAGES.get(stages, ()))
+    with _turn(directory / f".{hashlib.sha256(names.encode()).hexdigest()[:16]}.lock"):
+        return _load_or_solve(game, stages, directory, True, progress)
+
+
+@contextlib.contextmanager
+def _turn(lock: Path):
+    """Hold ``lock`` (an exclusive flock) while inside; a cache that cannot
+    hold one (read-only, on a file system without locks) is used unguarded."""
+    try:
+        lock.parent.mkdir(parents=True, exist_ok=True)
+        held = os.open(lock, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError:
+        yield
+        return
+    try:
+        try:
+            fcntl.flock(held, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            log.info("%s: another process is solving these sets; waiting to load them", lock.parent)
+            fcntl.flock(held, fcntl.LOCK_EX)
+        except OSError:
+            pass
+        yield
+    finally:
+        os.close(held)
+
+
+def _load_or_solve(
+    game: CtfGame, stages: str, directory: Path, use_cache: bool, progress: ProgressCallback | None
+) -> Solved:
     geometry = ctf_geometry(game.map, game.grid_points)
     known, sources, paths = {}, {}, {}
     for name in STAGES.get(stages, ()):
