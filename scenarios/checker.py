@@ -18,7 +18,9 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   a player cut off gets guidance again within ``REJOIN`` s of the heal;
 - ``failsafe``: a UAV whose ground station vanished applied its failsafe
   within its ``link_timeout``;
-- ``leftovers``: no process still runs from the run.
+- ``leftovers``: no process still runs from the run, and a kernel run left
+  neither its link nor its route in the host's namespace (a run that starts
+  right after may take the same names: check a run when it ends).
 """
 
 from __future__ import annotations
@@ -27,6 +29,7 @@ import itertools
 import json
 import math
 import os
+import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -310,9 +313,30 @@ def _leftovers(run: Run) -> Finding:
             continue
         if mine in cmdline and int(pid) != os.getpid():
             left.append(f"{pid} ({cmdline[:60].strip()})")
+    left += _network_left(run)
     if left:
-        return Finding("leftovers", False, f"still running: {', '.join(left)}")
+        return Finding("leftovers", False, f"left behind: {', '.join(left)}")
+    if run.kernel:
+        return Finding("leftovers", True, "no process, link or route of the run is left")
     return Finding("leftovers", True, "no process of the run is left")
+
+
+def _network_left(run: Run) -> list[str]:
+    """The link and route a kernel run added to the host (``endpoint.json``), if still there.
+    The run's namespaces, and the packet rules inside them, end with their
+    last process: a process left is what would keep them."""
+    try:
+        added = json.loads((run.directory / "endpoint.json").read_text()).get("network") or {}
+    except (FileNotFoundError, json.JSONDecodeError):
+        return []
+    left = []
+    if added.get("link") and Path(f"/sys/class/net/{added['link']}").exists():
+        left.append(f"link {added['link']}")
+    if added.get("route"):
+        routes = subprocess.run(["ip", "-j", "-4", "route"], capture_output=True, text=True).stdout or "[]"
+        if any(r.get("dst") == added["route"] for r in json.loads(routes)):
+            left.append(f"route {added['route']}")
+    return left
 
 
 def detected_after(directory: str | Path) -> dict[int, float]:

@@ -200,7 +200,8 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
     ):
         say(places.describe(netem))
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
-        (out / "endpoint.json").write_text(json.dumps({"endpoint": endpoint, "game": scenario.name}) + "\n")
+        where = {"endpoint": endpoint, "game": scenario.name, "network": places.host_side()}
+        (out / "endpoint.json").write_text(json.dumps(where) + "\n")
         inbox = Inbox("launcher")
         budget = SenderBudget()
         final: dict = {}

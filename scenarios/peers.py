@@ -61,6 +61,10 @@ class LocalPeers:
         """What impairs the run's traffic, for the launcher to say."""
         return f"network: on this host; each peer's shim impairs the messages it receives by profile {netem}"
 
+    def host_side(self) -> dict | None:
+        """What the run adds to the host's network while it runs (None: nothing)."""
+        return None
+
 
 class KernelPeers(LocalPeers):
     """Peers in namespaces behind a kernel network impairing packets with profile ``netem``."""
@@ -101,6 +105,9 @@ class KernelPeers(LocalPeers):
 
     def describe(self, netem: str) -> str:
         return self.network.describe()
+
+    def host_side(self) -> dict | None:
+        return self.network.host_side
 
 
 def _child(command: list[str], log: Path, again: bool = False) -> subprocess.Popen:

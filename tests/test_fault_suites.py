@@ -70,6 +70,9 @@ def test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed(tmp_
     seen = float(case["detected"].split()[0])
     assert 3.0 <= seen <= 3.0 + 2.0  # the lease, then the router's sweep: real packets, really dropped
     assert f"outage defender seen gone after {seen:.1f} s (lease 3 s)" in case["evidence"]["detection"]
+    assert case["evidence"]["leftovers"] == "no process, link or route of the run is left"
+    added = json.loads(next((tmp_path / "kernel").glob("*/seed-0/endpoint.json")).read_text())["network"]
+    assert added["link"].startswith("bcat") and added["route"].startswith("198.1")
 
 
 README = (Path(__file__).resolve().parent.parent / "README.md").read_text()

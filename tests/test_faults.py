@@ -290,6 +290,17 @@ def test_the_checker_catches_a_torn_log_a_lost_message_and_a_verdict_the_truth_d
     assert {f.name: f.held for f in check_run(run)}["verdict"] is False
 
 
+def test_the_checker_names_a_link_a_kernel_run_left_in_the_host(tmp_path):
+    play(tmp_path, [])
+    run = tmp_path / "run"
+    (run / "peers").mkdir()  # as a live run's directory
+    (run / "endpoint.json").write_text(json.dumps({"network": {"link": "lo", "route": None}}))
+    leftovers = {f.name: f for f in check_run(run)}["leftovers"]
+    assert leftovers.held is False and leftovers.evidence == "left behind: link lo"
+    (run / "endpoint.json").write_text(json.dumps({"network": {"link": "bcat-none", "route": "198.19.255.0/24"}}))
+    assert {f.name: f for f in check_run(run)}["leftovers"].held is True
+
+
 def test_a_second_run_into_the_same_directory_gets_its_own(tmp_path):
     path = tmp_path / "game.toml"
     path.write_text(scenario_text(time_limit=3.0))

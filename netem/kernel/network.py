@@ -121,6 +121,13 @@ class KernelNetwork:
     def __exit__(self, *_exc) -> None:
         self.close()
 
+    @property
+    def host_side(self) -> dict:
+        """What this network adds to the host's own namespace while it runs:
+        the link to the hub and the route through it (all else is inside the
+        namespaces and goes with them)."""
+        return {"link": self._veth, "route": None if self._subnet is None else str(self._subnet)}
+
     def describe(self) -> str:
         """Which machinery impairs the packets, and why not netem where the kernel has it."""
         kernel = (
