@@ -54,6 +54,7 @@ def test_the_builtin_suite_holds_live(tmp_path):
     assert "10 of 10 runs held every invariant they expect" in done.stdout
 
 
+@pytest.mark.xdist_group("kernel")
 @pytest.mark.skipif(os.geteuid() != 0 or shutil.which("iptables") is None, reason="kernel mode needs root and iptables")
 def test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed(tmp_path):
     done = subprocess.run(

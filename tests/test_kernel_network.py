@@ -7,6 +7,7 @@ SIGKILL of its launcher leaves no process, interface or route behind. These test
 skip with the reason otherwise (CI runs them as root).
 """
 
+import ipaddress
 import json
 import os
 import shutil
@@ -23,6 +24,9 @@ import pytest
 from bearcat.netem.kernel.network import KernelNetwork, missing
 
 needs_kernel = pytest.mark.skipif(missing() is not None, reason=str(missing()))
+# One worker of a parallel session runs these in turn: they look for what
+# any kernel network left in the host's namespace.
+pytestmark = pytest.mark.xdist_group("kernel")
 
 PROBES = 2000
 PROFILES = """
@@ -42,17 +46,28 @@ for k in range(count):
 """
 
 
-def leftovers() -> dict:
-    """What a kernel network leaves in this host's namespace: interfaces and routes."""
+def leftovers(added: dict) -> dict:
+    """What of ``added`` (a kernel network's ``host_side``: its link and its
+    route) is still in this host's namespace."""
     links = [
         link["ifname"]
         for link in json.loads(subprocess.run(["ip", "-j", "link"], capture_output=True, text=True).stdout)
     ]
     routes = json.loads(subprocess.run(["ip", "-j", "-4", "route"], capture_output=True, text=True).stdout)
+    subnet = ipaddress.ip_network(added["route"])
+    inside = [r["dst"] for r in routes if r.get("dst", "default") != "default"]
     return {
-        "interfaces": [name for name in links if name.startswith("bcat")],
-        "routes": [r["dst"] for r in routes if r.get("dst", "").startswith(("198.18.", "198.19."))],
+        "interfaces": [name for name in links if name == added["link"]],
+        "routes": [dst for dst in inside if ipaddress.ip_network(dst, strict=False).subnet_of(subnet)],
     }
+
+
+def added_by(tmp_path: Path) -> dict:
+    """The link and route the run in ``tmp_path`` added to the host (``endpoint.json``)."""
+    return json.loads((tmp_path / "run" / "endpoint.json").read_text())["network"]
+
+
+NOTHING = {"interfaces": [], "routes": []}
 
 
 @needs_kernel
@@ -63,6 +78,7 @@ def test_a_link_delays_and_loses_packets_as_its_profile_says(tmp_path):
         KernelNetwork("probe", seed=1, profiles=profiles, report=tmp_path / "network.json") as network,
         socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as receiver,
     ):
+        added = network.host_side
         receiver.bind((network.router, 0))
         receiver.settimeout(2.0)
         port = receiver.getsockname()[1]
@@ -85,8 +101,10 @@ def test_a_link_delays_and_loses_packets_as_its_profile_says(tmp_path):
     assert 0.099 < p50 < 0.106, p50  # the set 100 ms, plus the hub's scheduling
     assert p99 < 0.125, p99
     report = json.loads((tmp_path / "network.json").read_text())
-    assert report["prober -> hub"]["counts"]["delivered"] == len(delays)
-    assert leftovers() == {"interfaces": [], "routes": []}
+    # The hub's count of what it passed, against what arrived: a datagram it
+    # passed may still overflow the receiving socket's buffer on a busy host.
+    assert 0 <= report["prober -> hub"]["counts"]["delivered"] - len(delays) <= 2
+    assert leftovers(added) == NOTHING
 
 
 def run_kernel_game(tmp_path, *extra):
@@ -123,21 +141,24 @@ def test_a_live_game_under_3g_in_kernel_mode_ends_with_a_verdict(tmp_path):
     for direction, seen in report.items():
         assert seen["counts"]["delivered"] > 50, direction
         assert 0.115 <= seen["delay_s"]["p50"] < 0.2, direction  # 3g: 115 ms and a heavy tail
-    assert leftovers() == {"interfaces": [], "routes": []}
+    assert leftovers(added_by(tmp_path)) == NOTHING
 
 
 @needs_kernel
 def test_a_launcher_killed_with_sigkill_leaves_nothing_behind(tmp_path):
     launcher = run_kernel_game(tmp_path, "--netem", "wifi")
     wait_for_the_start(launcher)
-    assert leftovers()["interfaces"], "the run's link to its hub is up while it plays"
+    added = added_by(tmp_path)
+    assert leftovers(added)["interfaces"], "the run's link to its hub is up while it plays"
     os.kill(launcher.pid, signal.SIGKILL)
     launcher.wait(timeout=10)
+    # Nobody is left to delete the link: it goes when the kernel tears the
+    # hub's namespace down, in the background, once its last process died.
     end = time.monotonic() + 10
-    while time.monotonic() < end and (leftovers() != {"interfaces": [], "routes": []} or peers_of(tmp_path)):
+    while time.monotonic() < end and (leftovers(added) != NOTHING or peers_of(tmp_path)):
         time.sleep(0.1)
     assert peers_of(tmp_path) == []
-    assert leftovers() == {"interfaces": [], "routes": []}
+    assert leftovers(added) == NOTHING
 
 
 @needs_kernel
@@ -155,7 +176,7 @@ def test_a_run_ended_by_ctrl_c_or_by_a_peers_death_leaves_nothing_behind(tmp_pat
     outcome = json.loads((tmp_path / "run" / "outcome.json").read_text())
     assert outcome["ended"] or "interrupted" in outcome["reason"], output
     assert peers_of(tmp_path) == []
-    assert leftovers() == {"interfaces": [], "routes": []}
+    assert leftovers(added_by(tmp_path)) == NOTHING
 
 
 def wait_for_the_start(launcher: subprocess.Popen) -> None:
