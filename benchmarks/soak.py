@@ -15,9 +15,11 @@ below hits a different phone; each lasts less than the lease, so none ends
 the game. The lease is 15 s rather than 10 s: fifty Python processes on two
 cores take longer than 10 s to start a restarted one.
 
-Every 10 s the resident memory of each peer's process is sampled (the
-launcher's process tree, matched to peers by their ``--id``). A restarted
-phone is a new process; its memory counts from its restart. The report:
+Every 10 s the memory of each peer's process is sampled (the launcher's
+process tree, matched to peers by their ``--id``): its unique set size, the
+memory that is its own and would be freed if it exited (a leak grows it),
+and its resident size, which also counts the libraries every peer shares. A
+restarted phone is a new process; its memory counts from its restart. The report:
 per peer, the memory after a minute's warm-up, at the end, and the growth
 per minute fitted over the rest (least squares, 95 % interval); the run
 checker's findings; ``soak.png`` plots every peer's memory over time and
@@ -128,7 +130,7 @@ def peer_of(process: psutil.Process) -> str | None:
 
 
 def sample(launcher: psutil.Process, t: float, samples: dict) -> None:
-    """Each peer process's resident memory now, keyed by peer and pid (a restart is a new pid)."""
+    """Each peer process's unique and resident memory now (MiB), keyed by peer and pid (a restart is a new pid)."""
     try:
         children = launcher.children(recursive=True)
     except psutil.Error:
@@ -138,15 +140,17 @@ def sample(launcher: psutil.Process, t: float, samples: dict) -> None:
         if name is None:
             continue
         try:
-            rss = process.memory_info().rss / 2**20
+            memory = process.memory_full_info()
         except psutil.Error:
             continue
-        samples.setdefault(name, {}).setdefault(str(process.pid), []).append((t, rss))
+        samples.setdefault(name, {}).setdefault(str(process.pid), []).append(
+            (t, memory.uss / 2**20, memory.rss / 2**20)
+        )
 
 
 def growth(series: list[tuple[float, float]]) -> dict | None:
-    """Memory after the warm-up, at the end, and its fitted growth per minute with a 95 % interval."""
-    settled = [(t, m) for t, m in series if t - series[0][0] >= WARM_UP]
+    """Unique memory after the warm-up, at the end, and its fitted growth per minute with a 95 % interval."""
+    settled = [(t, m) for t, m, _ in series if t - series[0][0] >= WARM_UP]
     if len(settled) < 3:
         return None
     t, m = np.array(settled).T
@@ -171,10 +175,10 @@ def plot(samples: dict, path: Path) -> None:
     fig, ax = plt.subplots(figsize=(9, 5))
     for name, processes in sorted(samples.items()):
         for series in processes.values():
-            t, m = np.array(series).T
+            t, m, _ = np.array(series).T
             ax.plot(t / 60.0, m, lw=1.5 if name == "gs" else 0.6, color="C3" if name == "gs" else "C0", alpha=0.8)
     ax.set_xlabel("minutes since launch")
-    ax.set_ylabel("resident memory (MiB)")
+    ax.set_ylabel("unique memory (MiB)")
     ax.set_title("every peer's memory through the soak (red: the ground station)")
     ax.grid(alpha=0.3)
     fig.tight_layout()
@@ -213,8 +217,12 @@ def main() -> int:
             t = time.monotonic() - started
             sample(watched, t, samples)
             if samples and int(t) % 60 < SAMPLE_EVERY:
-                total = sum(s[-1][1] for p in samples.values() for s in p.values() if t - s[-1][0] < SAMPLE_EVERY)
-                print(f"  {t / 60:5.1f} min: {len(samples)} peers, {total:.0f} MiB resident", flush=True)
+                now = [s[-1] for p in samples.values() for s in p.values() if t - s[-1][0] < SAMPLE_EVERY]
+                print(
+                    f"  {t / 60:5.1f} min: {len(now)} peer processes, {sum(m[1] for m in now):.0f} MiB "
+                    f"their own, {max(m[2] for m in now):.0f} MiB the largest resident",
+                    flush=True,
+                )
             time.sleep(SAMPLE_EVERY - (time.monotonic() - started) % SAMPLE_EVERY)
     print(f"the launcher exited with {launcher.returncode} after {(time.monotonic() - started) / 60:.1f} min")
 
