@@ -216,8 +216,8 @@ def main() -> int:
         while launcher.poll() is None:
             t = time.monotonic() - started
             sample(watched, t, samples)
-            if samples and int(t) % 60 < SAMPLE_EVERY:
-                now = [s[-1] for p in samples.values() for s in p.values() if t - s[-1][0] < SAMPLE_EVERY]
+            now = [s[-1] for p in samples.values() for s in p.values() if t - s[-1][0] < SAMPLE_EVERY]
+            if now and int(t) % 60 < SAMPLE_EVERY:
                 print(
                     f"  {t / 60:5.1f} min: {len(now)} peer processes, {sum(m[1] for m in now):.0f} MiB "
                     f"their own, {max(m[2] for m in now):.0f} MiB the largest resident",

@@ -33,6 +33,7 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
+import msgspec
 import numpy as np
 import shapely
 
@@ -60,9 +61,9 @@ class Finding:
     evidence: str
 
 
-def check_run(directory: str | Path) -> list[Finding]:
-    """Every invariant of the run in ``directory``."""
-    run = Run(Path(directory))
+def check_run(directory: str | Path | Run) -> list[Finding]:
+    """Every invariant of the run in ``directory`` (or of a ``Run`` read already)."""
+    run = directory if isinstance(directory, Run) else Run(Path(directory))
     return [
         _logs(run),
         _reliable(run),
@@ -74,13 +75,19 @@ def check_run(directory: str | Path) -> list[Finding]:
 
 
 class Run:
-    """What a run directory recorded, read once."""
+    """What a run directory recorded that the invariants judge, read once.
+
+    A long run's logs hold gigabytes (fifty phones at 10 Hz, each answered
+    with the positions of all fifty): only the events an invariant reads are
+    kept, and of what a receiver got only the reliable kinds and guidance,
+    with the span over which each receiver recorded anything."""
 
     def __init__(self, directory: Path) -> None:
         if not (directory / "events.jsonl").exists():
             raise FileNotFoundError(f"{directory} is not a run directory: it has no events.jsonl")
         self.directory = directory
         self.torn: dict[str, int] = {}  # log -> line number of its first unreadable line
+        self.listening: dict[str, tuple[float, float]] = {}  # receiver -> first and last time it received
         self.events = self._read(directory / "events.jsonl")
         self.peer_logs = {p.stem: self._read(p) for p in sorted((directory / "peers").glob("*.jsonl"))}
         self.outcome = self._outcome()
@@ -90,22 +97,38 @@ class Run:
         self.faults = [e for e in self.events if e["event"] == "fault"]
         self.ended = {e["fault"]: e["t"] for e in self.events if e["event"] == "fault-end"}
         self.seen = [e for e in self.events if e["event"] in ("gone", "alive")]
+        self._records = [e for log in self.peer_logs.values() for e in log] if self.peer_logs else self.events
 
     def records(self) -> list[dict]:
         """What the peers sent and received: their own logs in a live run, the one log in a simulated one."""
-        if self.peer_logs:
-            return [e for log in self.peer_logs.values() for e in log]
-        return self.events
+        return self._records
 
     def _read(self, path: Path) -> list[dict]:
         events = []
-        with open(path, encoding="utf-8", errors="replace") as f:
+        decode = msgspec.json.Decoder().decode
+        with open(path, "rb") as f:
             for n, line in enumerate(f, 1):
                 try:
-                    events.append(json.loads(line))
-                except json.JSONDecodeError:
+                    event = decode(line)
+                except msgspec.DecodeError:
+                    event = None
+                if not isinstance(event, dict) or "event" not in event:
                     self.torn.setdefault(str(path.relative_to(self.directory)), n)
+                elif self._judged(event):
+                    events.append(event)
         return events
+
+    def _judged(self, e: dict) -> bool:
+        """Whether an invariant reads ``e``; notes the span of what each receiver got."""
+        what = e["event"]
+        if what == "received":
+            receiver, t = e.get("receiver"), e.get("t", 0.0)
+            first, last = self.listening.get(receiver, (t, t))
+            self.listening[receiver] = (min(first, t), max(last, t))
+            return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "guidance")
+        if what == "sent":
+            return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "truth")
+        return what in ("did", "fault", "fault-end", "gone", "alive")
 
     def _outcome(self) -> dict | None:
         try:
@@ -148,21 +171,17 @@ def _logs(run: Run) -> Finding:
 def _reliable(run: Run) -> Finding:
     sent: dict[tuple[str, str], list[tuple[float, int]]] = {}
     received: dict[tuple[str, str, str], set[int]] = {}
-    first: dict[str, float] = {}
-    last: dict[str, float] = {}
     for e in run.records():
         if e["event"] == "sent" and _kind(e["key"]) in RELIABLE_KINDS:
             sent.setdefault((e["sender"], e["key"]), []).append((e["t"], e["message"].get("seq", 0)))
-        elif e["event"] == "received":
-            first[e["receiver"]] = min(first.get(e["receiver"], math.inf), e["t"])
-            last[e["receiver"]] = max(last.get(e["receiver"], -math.inf), e["t"])
-            if _kind(e["key"]) in RELIABLE_KINDS:
-                received.setdefault((e["sender"], e["receiver"], e["key"]), set()).add(e["seq"])
+        elif e["event"] == "received" and _kind(e["key"]) in RELIABLE_KINDS:
+            received.setdefault((e["sender"], e["receiver"], e["key"]), set()).add(e["seq"])
     delivered = excused = 0
     missing = []
     for (sender, receiver, key), seqs in received.items():
+        first, last = run.listening.get(receiver, (math.inf, -math.inf))
         for t, seq in sent.get((sender, key), []):
-            if t > last.get(receiver, -math.inf) - IN_FLIGHT or t < first.get(receiver, math.inf):
+            if t > last - IN_FLIGHT or t < first:
                 continue  # in flight when the receiver stopped recording, or sent before it listened
             if seq in seqs:
                 delivered += 1
@@ -339,9 +358,9 @@ def _network_left(run: Run) -> list[str]:
     return left
 
 
-def detected_after(directory: str | Path) -> dict[int, float]:
+def detected_after(directory: str | Path | Run) -> dict[int, float]:
     """Seconds from each fault that takes a peer away to the launcher seeing it gone, by fault index."""
-    run = Run(Path(directory))
+    run = directory if isinstance(directory, Run) else Run(Path(directory))
     lease = run.scenario.lease if run.scenario is not None else 10.0
     found = {}
     for fault in run.faults:

@@ -32,6 +32,7 @@ from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
 from bearcat.bus.codec import Inbox
+from bearcat.bus.handoff import Handoff
 from bearcat.bus.messages import Control, FaultNotice, GameState
 from bearcat.netem.shim import Shim
 from bearcat.scenarios.dispatch import Dispatcher
@@ -96,13 +97,7 @@ async def run_peer(
         if not session.closed:  # tokens vanish as the peer's own session closes
             dispatch.peer(agent, key, alive)
 
-    def soon(fn, *args) -> None:
-        """Hand a sample from Zenoh's thread to the loop; samples that arrive
-        while the peer shuts down are dropped."""
-        try:
-            loop.call_soon_threadsafe(fn, *args)
-        except RuntimeError:  # the loop is closed
-            pass
+    soon = Handoff(loop).put  # from Zenoh's threads; what arrives while the peer shuts down is dropped
 
     handles = {}
     for agent in agents:

@@ -37,7 +37,7 @@ from msgspec import Meta
 
 from bearcat.bus.messages import Name
 from bearcat.bus.validation import Invalid, convert
-from bearcat.scenarios.checker import INVARIANTS, check_run, detected_after
+from bearcat.scenarios.checker import INVARIANTS, Run, check_run, detected_after
 from bearcat.scenarios.faults import Fault, FaultError, check_faults, load_faults, refusal, write_faults
 from bearcat.scenarios.run_directory import write_scenario
 from bearcat.scenarios.schema import ScenarioError, list_scenarios, load_scenario
@@ -164,13 +164,14 @@ def run_case(case: Case, seed: int, out: Path, *, runtime: str, network: str = "
     if case.faults:
         write_faults(out / "faults.toml", case.faults)
     outcome = _simulate(case, seed, out) if runtime == "simulate" else _live(case, seed, out, network, say)
-    findings = {f.name: f for f in check_run(out)}
+    run = Run(out)
+    findings = {f.name: f for f in check_run(run)}
     expected = case.expect or tuple(name for name, f in findings.items() if f.held is not None)
     result = CaseResult(
         case=case.name,
         seed=seed,
         faults="; ".join(f.describe() for f in case.faults) or "none",
-        detected=", ".join(f"{s:.2f} s" for s in detected_after(out).values()) or "-",
+        detected=", ".join(f"{s:.2f} s" for s in detected_after(run).values()) or "-",
         outcome=outcome,
         run=str(out),
         evidence={name: f.evidence for name, f in findings.items()},

@@ -312,3 +312,38 @@ def test_a_sender_over_its_budget_gets_the_burst_then_the_rate_and_is_said_once_
     assert said == {("vandal", "k"): 30_000 - passed} and budget.news(3.5) == {}
     steady = sum(budget.allow("phone", "fix", 10.0 + k / 50.0) for k in range(5_000))  # 50 Hz for 100 s
     assert steady == 5_000  # a legitimate stream never goes over
+
+
+def test_a_flood_from_zenoh_threads_wakes_a_busy_loop_once_and_loses_nothing():
+    """Ten thousand samples put from two threads while the loop is busy: one
+    wake-up of its self-pipe (a byte each would fill it and lose a signal),
+    every sample handled once, each thread's in order, past one that raises."""
+    import asyncio
+    import threading
+
+    from bearcat.bus.handoff import Handoff
+
+    async def flood():
+        loop = asyncio.get_running_loop()
+        wakeups = []
+        wake = loop.call_soon_threadsafe
+        loop.call_soon_threadsafe = lambda *a: (wakeups.append(1), wake(*a))
+        handoff, seen = Handoff(loop), []
+
+        def handle(source, k):
+            if k == 3:
+                raise ValueError("a bad sample")
+            seen.append((source, k))
+
+        threads = [threading.Thread(target=lambda s=s: [handoff.put(handle, s, k) for k in range(5000)]) for s in "ab"]
+        for t in threads:
+            t.start()
+        for t in threads:
+            t.join()  # the loop is busy here: nothing of the flood has run
+        await asyncio.sleep(0.05)
+        return wakeups, seen
+
+    wakeups, seen = asyncio.run(flood())
+    assert len(wakeups) == 1
+    assert [k for s, k in seen if s == "a"] == [k for k in range(5000) if k != 3]
+    assert [k for s, k in seen if s == "b"] == [k for k in range(5000) if k != 3]
