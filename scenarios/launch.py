@@ -317,7 +317,7 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
                 started_at = time.monotonic()
                 say(f"{game}: {len(expected)} peers up; game started")
                 limit = scenario.time_limit + GRACE
-                reason = _supervise(children, final, lock, started_at, limit, scenario.lease, injector)
+                reason = _supervise(children, final, lock, started_at, limit, scenario.lease, injector, out / "peers")
         except KeyboardInterrupt:
             reason = "interrupted"
         finally:
@@ -384,7 +384,19 @@ def agent_failures(peers: Path) -> dict[str, int]:
     return dict(sorted(counts.items()))
 
 
-def _supervise(children, final, lock, started_at: float, limit: float, lease: float, injector) -> str | None:
+def _why(logs: Path, name: str) -> str:
+    """What a peer that exited said of why (``peer NAME: REASON``, its log's last words), as a clause."""
+    try:
+        lines = (logs / f"{name}.log").read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    said = next((line for line in reversed(lines) if line.startswith(f"peer {name}: ")), None)
+    return "" if said is None else f" ({said.split(': ', 1)[1][:120]})"
+
+
+def _supervise(
+    children, final, lock, started_at: float, limit: float, lease: float, injector, logs: Path
+) -> str | None:
     """Wait for the end of the game; why the launcher had to end it, if it did
     (a dead walker's forfeit is the referee's to call, once its ``lease`` to
     rejoin has run out; a peer a fault restarts is not dead)."""
@@ -401,10 +413,10 @@ def _supervise(children, final, lock, started_at: float, limit: float, lease: fl
             if GROUND in dead:
                 if GROUND in downed:
                     return f"the ground station is gone: {downed[GROUND][0]}"
-                return f"the ground station exited with code {children[GROUND].returncode}"
+                return f"the ground station exited with code {children[GROUND].returncode}{_why(logs, GROUND)}"
             gone_since = gone_since or time.monotonic()
             if time.monotonic() - gone_since > lease + 3.0:
-                return f"peer {dead[0]} exited with code {children[dead[0]].returncode}"
+                return f"peer {dead[0]} exited with code {children[dead[0]].returncode}{_why(logs, dead[0])}"
         if time.monotonic() - started_at > limit:
             return f"no result within {limit:g} s"
         time.sleep(0.05)

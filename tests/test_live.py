@@ -331,7 +331,11 @@ def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_s
         assert scenario.name == "test-game" and scenario.map.bounds == (0.0, 0.0, 50.0, 50.0)
         assert scenario.ids == ["attacker", "defender"] and scenario.map.region("home")
         launcher.send_signal(signal.SIGINT)
-        launcher.communicate(timeout=60)
+        try:
+            launcher.communicate(timeout=120)
+        except subprocess.TimeoutExpired:
+            logs = {p.name: p.read_text()[-300:] for p in (out / "peers").glob("*.log")}
+            pytest.fail(f"the launcher did not end within 120 s of SIGINT; its peers said {logs}")
     finally:
         if launcher.poll() is None:
             launcher.kill()
