@@ -7,9 +7,16 @@ wrong interface, slowly), explicit endpoints to connect to, and a 1 s link
 lease so a frozen peer's liveliness vanishes within about a second.
 
 Fixes go best effort with congestion control DROP (a lost fix is lost, not
-delivered late in a burst); everything else reliable with BLOCK. Every put
-carries the sender's session name as its attachment, which is how the
-receiver's netem shim knows the directed link a message came over.
+delivered late in a burst); everything else reliable with BLOCK.
+
+Every put carries its sender's name as its attachment, which is how the
+receiver's netem shim knows the directed link a message came over. A
+session with ``credentials`` (``bus.identity``) seals each put instead, and
+hands on only the samples whose seal holds, whose sender the access policy
+lets publish on that key (``bus.policy``), and that are newer than the last
+that sender put there; the rest are counted, logged and reported to
+``on_refused`` with the name they claimed. A session without credentials
+believes every name it is told: it is for a private host only.
 
 Over TCP a best-effort put is still retransmitted by TCP: a lost packet
 stalls everything behind it and then arrives in a burst. A session given a
@@ -36,12 +43,17 @@ import json
 import logging
 import re
 import threading
+from collections import Counter
+from collections.abc import Callable
 
+import msgspec
 import zenoh
 
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
+from bearcat.bus.identity import Credentials, Refusal
 from bearcat.bus.inprocess import Callback, LivelinessCallback
+from bearcat.bus.policy import may_publish
 
 log = logging.getLogger(__name__)
 
@@ -89,14 +101,29 @@ def config(
     return c
 
 
+Refused = Callable[[str, str, str, str], None]
+"""``refused(key, claimed_sender, category, reason)``: a sample a sealed session would not hand on."""
+
+
 class ZenohSession:
     """One peer's Zenoh session, named ``name`` (the sender id on its puts);
-    with ``best_effort``, a second one for the best-effort kinds of key."""
+    with ``best_effort``, a second one for the best-effort kinds of key; with
+    ``credentials``, sealed both ways."""
 
     def __init__(
-        self, name: str, zconfig: zenoh.Config | None = None, *, best_effort: zenoh.Config | None = None
+        self,
+        name: str,
+        zconfig: zenoh.Config | None = None,
+        *,
+        best_effort: zenoh.Config | None = None,
+        credentials: Credentials | None = None,
     ) -> None:
         self.name = keys.check_name(name, "session name")
+        if credentials is not None and credentials.name != self.name:
+            raise BusError(f"session {name!r} cannot sign with the credentials of {credentials.name!r}")
+        self.credentials = credentials
+        self.refusals: Counter[str] = Counter()
+        self.on_refused: Refused | None = None  # told of each refusal, on Zenoh's thread
         self.closed = False
         self.callback_errors = 0
         self._lock = threading.Lock()
@@ -127,7 +154,8 @@ class ZenohSession:
                 congestion_control=zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP,
             )
             self._publishers[(key, reliable)] = publisher
-        publisher.put(bytes(payload), attachment=self._attachment)
+        payload = bytes(payload)
+        publisher.put(payload, attachment=self._seal(key, payload))
 
     def subscribe(self, key_expr: str, callback: Callback) -> None:
         """Call ``callback(key, payload, sender)`` for every sample on ``key_expr``."""
@@ -146,13 +174,17 @@ class ZenohSession:
         ``travels_here``: the same sample reaches both sessions of a peer
         subscribed on both, and only one of them may deliver it."""
 
+        newest: dict[tuple[str, str], int] = {}  # (sender, key) -> the count of the last sample taken
+
         def on_sample(sample: zenoh.Sample) -> None:
             try:
                 key = str(sample.key_expr)
                 if not travels_here(key):
                     return
-                sender = sample.attachment.to_bytes().decode("utf-8", "replace") if sample.attachment else ""
-                callback(key, sample.payload.to_bytes(), sender)
+                payload = sample.payload.to_bytes()
+                sender = self._sender(key, payload, sample.attachment, newest)
+                if sender is not None:
+                    callback(key, payload, sender)
             except Exception:
                 self._callback_failed(key_expr)
 
@@ -183,7 +215,8 @@ class ZenohSession:
 
         def on_query(query: zenoh.Query) -> None:
             try:
-                query.reply(key, reply())
+                payload = bytes(reply())
+                query.reply(key, payload, attachment=self._seal(key, payload))
             except Exception:
                 self._callback_failed(key)
 
@@ -194,7 +227,9 @@ class ZenohSession:
         self._check_open()
         for reply in self._session.get(key, timeout=timeout):
             if reply.ok is not None:
-                return reply.ok.payload.to_bytes()
+                payload = reply.ok.payload.to_bytes()
+                if self._sender(key, payload, reply.ok.attachment, {}) is not None:
+                    return payload
         return None
 
     def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
@@ -229,6 +264,43 @@ class ZenohSession:
                 log.warning("session %s closed without every goodbye: %s", self.name, exc)
         self._opened.clear()
 
+    def _seal(self, key: str, payload: bytes) -> bytes:
+        if self.credentials is None:
+            return self._attachment
+        return self.credentials.seal(key, payload)
+
+    def _sender(self, key: str, payload: bytes, attachment, newest: dict) -> str | None:
+        """Who put ``payload`` on ``key``, or None when a sealed session cannot
+        believe anyone did (the refusal is counted, logged and reported)."""
+        attachment = attachment.to_bytes() if attachment is not None else b""
+        if self.credentials is None:
+            return attachment.decode("utf-8", "replace")
+
+        def admit(member, n):
+            if not may_publish(member.role, member.name, key):
+                raise Refusal("not allowed", f"{member.role} {member.name!r} may not publish on {key}")
+            if n <= newest.get((member.name, key), -1):
+                raise Refusal("replayed", f"a message on {key} from {member.name!r} older than one already taken")
+
+        try:
+            member, n = self.credentials.open(key, payload, attachment, admit)
+            with self._lock:
+                admit(member, n)  # again: another sample from the same sender may have been taken meanwhile
+                newest[(member.name, key)] = n
+            return member.name
+        except Refusal as refusal:
+            self._refuse(key, attachment, refusal)
+            return None
+
+    def _refuse(self, key: str, attachment: bytes, refusal: Refusal) -> None:
+        with self._lock:
+            self.refusals[refusal.category] += 1
+            n = self.refusals[refusal.category]
+        if n == 1 or n % 100 == 0:
+            log.warning("%s refused a message (%s, %d so far): %s", self.name, refusal.category, n, refusal)
+        if self.on_refused is not None:
+            self.on_refused(key, _claimed(attachment), refusal.category, str(refusal))
+
     def _callback_failed(self, key_expr: str) -> None:
         with self._lock:
             self.callback_errors += 1
@@ -237,6 +309,15 @@ class ZenohSession:
     def _check_open(self) -> None:
         if self.closed:
             raise BusError(f"session {self.name!r} is closed")
+
+
+def _claimed(attachment: bytes) -> str:
+    """The sender an attachment names, whatever it is (for the record of a refusal)."""
+    try:
+        name = msgspec.msgpack.decode(attachment)[0]
+    except (msgspec.DecodeError, TypeError, IndexError, KeyError):
+        name = attachment.decode("utf-8", "replace")
+    return name[:64] if isinstance(name, str) else "?"
 
 
 def best_effort_endpoint(endpoint: str) -> str:

@@ -14,7 +14,8 @@ fails cannot flood the log. Nothing is sent for the call that failed.
 
 What one sender puts on one key is held to a budget per receiving agent
 (``bus.budget``): a flood is dropped before it is decoded, and said once a
-second in the event log (``over-budget``), so it cannot fill the disk.
+second in the event log (``over-budget``), so it cannot fill the disk. So is
+what a live peer's session refused to believe, by the sender it claimed.
 
 What an agent did on its own and keeps in its ``events`` list (a UAV's
 failsafe, its landing) is recorded as ``did`` events, as it happens.
@@ -54,6 +55,7 @@ class Dispatcher:
         self._inboxes: dict[str, Inbox] = {}
         self._told: dict[str, int] = {}  # agent -> how many of its events are recorded
         self._budgets: dict[str, SenderBudget] = {}
+        self._unbelieved = SenderBudget()  # what a peer's session would not believe, by the sender it claimed
 
     def attach(self, agent: Agent, session) -> None:
         """Drive ``agent`` on ``session`` (peers that run several agents share one)."""
@@ -100,6 +102,16 @@ class Dispatcher:
         self.record.received(now, sender, agent.name, key, getattr(message, "seq", None))
         self._publish(agent, self._call(agent, key, agent.handle, key, message, self._now(agent)))
         return message
+
+    def unbelieved(self, receiver: str, key: str, claimed: str, reason: str) -> None:
+        """Record a message ``receiver``'s session refused (its seal did not
+        hold), within what the sender it claimed may cost."""
+        now = self.now()
+        if self._unbelieved.allow(claimed, key, now):
+            self.record.refused(now, claimed, receiver, key, reason)
+            return
+        for (who, where), n in self._unbelieved.news(now).items():
+            self.record.note(now, "over-budget", sender=who, receiver=receiver, key=where, dropped=n)
 
     def _call(self, agent: Agent, where: str, method, *args) -> list[Send]:
         try:

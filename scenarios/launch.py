@@ -46,10 +46,13 @@ from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.identity import Credentials
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.scenarios.credentials import run_authority, spend
 from bearcat.scenarios.dispatch import FAILED
-from bearcat.scenarios.faults import FaultError, refusal, write_faults
+from bearcat.scenarios.fault_effects import LAUNCHER
+from bearcat.scenarios.faults import GROUND, FaultError, refusal, write_faults
 from bearcat.scenarios.live_faults import LiveFaults
 from bearcat.scenarios.peers import KernelPeers, LocalPeers
 from bearcat.scenarios.run_directory import write_scenario
@@ -58,7 +61,6 @@ from bearcat.scenarios.small_disk import SmallDisk
 
 log = logging.getLogger(__name__)
 
-GROUND = "gs"
 ENDING = ("peer ", "vehicle ")  # how the last line of a peer's or a vehicle's log starts
 STARTUP = 60.0  # s for every peer to come up
 GRACE = 5.0  # s past the time limit before the launcher stops a game itself
@@ -104,7 +106,15 @@ def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
 
 
 def peer_command(
-    role: str, scenario_ref: str, agent: str, endpoint: str, seed: int, netem: str, out: Path, transport: str = "tcp"
+    role: str,
+    scenario_ref: str,
+    agent: str,
+    endpoint: str,
+    seed: int,
+    netem: str,
+    out: Path,
+    certs: Path,
+    transport: str = "tcp",
 ) -> list[str]:
     return [
         sys.executable,
@@ -128,6 +138,8 @@ def peer_command(
         transport,
         "--out",
         str(out),
+        "--certs",
+        str(certs),
     ]
 
 
@@ -143,8 +155,11 @@ def launch(
     say=print,
     startup: float = STARTUP,
     faults: tuple | None = None,
+    certs: Path | None = None,
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
+    ``certs`` a directory of certificates for every peer (``bearcat certs
+    init``; default: a new authority for this run alone, in ``out/certs``);
     ``transport`` is how best-effort messages travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim;
@@ -166,6 +181,7 @@ def launch(
             say=say,
             startup=startup,
             fill=None if disk is None else disk.fill,
+            certs=certs,
         )
     if full is not None:  # the disk is back: say what the full one could not take
         _rewrite_outcome(out, outcome)
@@ -177,10 +193,22 @@ def launch(
     return outcome
 
 
-def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network, say, startup, fill) -> LiveOutcome:
+def _play(scenario, scenario_ref, out, plan, *, certs, **how) -> LiveOutcome:
+    """Play under the run's authority; one made for the run is spent with it."""
+    out.mkdir(parents=True, exist_ok=True)
+    authority = run_authority(out, scenario, certs)
+    try:
+        return _play_sealed(scenario, scenario_ref, out, plan, certs=authority.resolve(), **how)
+    finally:
+        if certs is None:
+            spend(authority)
+
+
+def _play_sealed(
+    scenario, scenario_ref, out, plan, *, seed, netem, transport, network, say, startup, fill, certs
+) -> LiveOutcome:
     """Start the peers, play, stop them; the outcome, written beside what the run recorded if the disk lets it."""
     lease_ms = round(1000 * scenario.lease)
-    out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     write_scenario(out, scenario)
     plan_flags: tuple[str, ...] = ()
@@ -195,12 +223,16 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
     # host it delays and drops fixes (benchmarks/field.py, --mode).
     with (
         places,
-        ZenohSession("launcher", config(listen=places.listen, mode="router", lease_ms=lease_ms)) as session,
+        ZenohSession(
+            LAUNCHER,
+            config(listen=places.listen, mode="router", lease_ms=lease_ms),
+            credentials=Credentials(certs, LAUNCHER),
+        ) as session,
         closing(EventLog(out / "events.jsonl")) as record,
     ):
         say(places.describe(netem))
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
-        where = {"endpoint": endpoint, "game": scenario.name, "network": places.host_side()}
+        where = {"endpoint": endpoint, "game": scenario.name, "certs": str(certs), "network": places.host_side()}
         (out / "endpoint.json").write_text(json.dumps(where) + "\n")
         inbox = Inbox("launcher")
         budget = SenderBudget()
@@ -210,23 +242,37 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
         game = scenario.name
         injector: LiveFaults | None = None
 
+        def within_budget(sender, key, now) -> bool:
+            """Whether what ``sender`` put on ``key`` may cost the record a line (under the lock)."""
+            if budget.allow(sender, key, now):
+                return True
+            for (who, where), n in budget.news(now).items():
+                record.note(now, "over-budget", sender=who, receiver=LAUNCHER, key=where, dropped=n)
+            return False
+
         def seen(key, payload, sender):
             now = time.time()
             with lock:
-                if not budget.allow(sender, key, now):
-                    for (who, where), n in budget.news(now).items():
-                        record.note(now, "over-budget", sender=who, receiver="launcher", key=where, dropped=n)
+                if not within_budget(sender, key, now):
                     return
             message = inbox.accept(key, payload)
             with lock:
                 if message is None:
-                    record.refused(now, sender, "launcher", key, "undecodable or wrong for its key")
+                    record.refused(now, sender, LAUNCHER, key, "undecodable or wrong for its key")
                     return
                 record.sent(now, sender, key, message)
                 if isinstance(message, GameState) and message.phase == "ended" and "state" not in final:
                     final["state"] = message
             if injector is not None:
                 injector.saw(message, now)
+
+        def forged(key, claimed, category, reason):
+            now = time.time()
+            with lock:
+                if within_budget(claimed, key, now):
+                    record.refused(now, claimed, LAUNCHER, key, f"{category}: {reason}")
+
+        session.on_refused = forged
 
         def liveliness(key, up):
             with lock:
@@ -249,7 +295,7 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
 
             def command(role: str, name: str, *extra: str):
                 return lambda at: [
-                    *peer_command(role, scenario_ref, name, at, seed, netem, out, transport),
+                    *peer_command(role, scenario_ref, name, at, seed, netem, out, certs, transport),
                     *places.peer_flags,
                     *plan_flags,
                     *extra,
@@ -279,7 +325,7 @@ def _play(scenario, scenario_ref, out, plan, *, seed, netem, transport, network,
             for name in keyboard:
                 say(
                     f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
-                    + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out, transport))
+                    + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out, certs, transport))
                 )
             deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
             while True:

@@ -99,6 +99,11 @@ async def run_peer(
 
     soon = Handoff(loop).put  # from Zenoh's threads; what arrives while the peer shuts down is dropped
 
+    def refused(key, claimed, category, reason):
+        dispatch.unbelieved(session.name, key, claimed, f"{category}: {reason}")
+
+    session.on_refused = lambda *refusal: soon(refused, *refusal)
+
     handles = {}
     for agent in agents:
         dispatch.attach(agent, session)
@@ -212,8 +217,12 @@ def start_peer(
     emulated: bool = False,
     faults: tuple = (),
     resume: bool = False,
+    certs=None,
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
+    With ``certs``, a directory holding this peer's certificate and key, it
+    seals what it sends and takes only what the access policy lets each
+    provable sender publish; without, it believes every name (a private host).
     ``faults`` is the run's fault plan; a peer restarted mid-game ``resume``s
     from its own log in ``out``.
     With ``transport`` "udp" its best-effort messages go to the same
@@ -225,6 +234,7 @@ def start_peer(
     import shapely
 
     from bearcat.bus.errors import BusError
+    from bearcat.bus.identity import Credentials
     from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
     from bearcat.netem.models import LinkModel
     from bearcat.netem.profiles import load_profile
@@ -289,6 +299,7 @@ def start_peer(
             else config(
                 listen=[], connect=[best_effort_endpoint(e) for e in connect], mode="client", lease_ms=lease_ms
             ),
+            credentials=None if certs is None else Credentials(certs, name),
         ) as session,
     ):
         if role == "ground-station":
@@ -388,16 +399,20 @@ async def _fly(autopilot, peer) -> str:
 GROUND_PEERS = ("gs", "referee", "launcher")
 
 
-def fetch_scenario(game: str, connect, timeout: float = 10.0):
-    """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``)."""
+def fetch_scenario(game: str, connect, timeout: float = 10.0, *, certs=None, name: str | None = None):
+    """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``);
+    with ``certs``, asked as peer ``name`` and taken only from a provable ground station."""
     import time
 
     from bearcat.bus.errors import BusError
+    from bearcat.bus.identity import Credentials
     from bearcat.bus.zenoh_session import ZenohSession, config
     from bearcat.maps.geojson import parse_geojson
     from bearcat.scenarios.schema import parse_scenario
 
-    with ZenohSession(f"fetch-{int(time.time() * 1000) % 10**9}", config(connect=connect)) as session:
+    credentials = None if certs is None else Credentials(certs, name)
+    asker = f"fetch-{int(time.time() * 1000) % 10**9}" if credentials is None else credentials.name
+    with ZenohSession(asker, config(connect=connect), credentials=credentials) as session:
         end = time.monotonic() + timeout
         text = geojson = None
         while time.monotonic() < end and (text is None or geojson is None):

@@ -6,7 +6,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from bearcat import arguments
-from bearcat.scenarios.faults import load_faults
+from bearcat.scenarios.faults import GROUND, load_faults
 from bearcat.scenarios.peers import NETWORKS
 from bearcat.scenarios.run_directory import fresh
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
@@ -46,6 +46,12 @@ def register(subparsers) -> None:
         type=Path,
         metavar="FILE",
         help="a fault plan ([[fault]] tables) to apply instead of the scenario's own",
+    )
+    run.add_argument(
+        "--certs",
+        type=Path,
+        metavar="DIR",
+        help="certificates of every peer (bearcat certs init); default: a new authority for this run alone",
     )
     run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
@@ -129,6 +135,13 @@ def register(subparsers) -> None:
     )
     peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
     peer.add_argument(
+        "--certs",
+        type=Path,
+        metavar="DIR",
+        help="the game's certificates (RUN/certs of a bearcat run, or bearcat certs init): this peer seals what "
+        "it sends with ID.key and believes only senders the authority vouches for; without it, every name",
+    )
+    peer.add_argument(
         "--faults", type=Path, metavar="FILE", help="the run's fault plan: apply the faults the launcher announces"
     )
     peer.add_argument(
@@ -180,6 +193,7 @@ def run_live(args) -> int:
             network=args.network,
             say=lambda text: print(text, flush=True),
             faults=plan,
+            certs=args.certs,
         )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
@@ -225,8 +239,9 @@ def _open_viewer(rrd: Path, *extra: str) -> int:
 def run_peer(args) -> int:
     from bearcat.scenarios.live import fetch_scenario, start_peer
 
+    name = args.id if args.role != "ground-station" else GROUND
     if args.scenario.startswith("zenoh:"):
-        scenario = fetch_scenario(args.scenario[len("zenoh:") :], args.connect)
+        scenario = fetch_scenario(args.scenario[len("zenoh:") :], args.connect, certs=args.certs, name=name)
     else:
         scenario = load_scenario(args.scenario)
     if args.role == "ground-station":
@@ -251,8 +266,9 @@ def run_peer(args) -> int:
             emulated=args.emulated,
             faults=plan,
             resume=args.resume,
+            certs=args.certs,
         )
-    print(f"peer {args.id if args.role != 'ground-station' else 'gs'}: {reason}", flush=True)
+    print(f"peer {name}: {reason}", flush=True)
     return 0
 
 

@@ -1,0 +1,74 @@
+"""The identities of a scenario's peers: who holds a certificate, in which role.
+
+A live run always seals its messages. ``bearcat run`` makes a fresh
+authority for the run in ``RUN/certs`` (so even a run on a shared network
+with ``--secure`` off accepts game state, control and truth only from the
+peers it started) unless it is given a directory ``bearcat certs init`` made,
+which a field game's laptop and phones share. A run's own authority is
+spent once the run is over: its private keys are deleted, and its
+certificates stay as the record of who played.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from bearcat.bus.errors import BusError
+from bearcat.bus.identity import AUTHORITY, add_members, make_authority, members_of
+from bearcat.scenarios.fault_effects import LAUNCHER
+from bearcat.scenarios.faults import GROUND
+from bearcat.scenarios.schema import Scenario
+
+
+def members(scenario: Scenario, phones: tuple[str, ...] = ()) -> dict[str, str]:
+    """Every peer of ``scenario`` and its role; the agents in ``phones`` are real phones, the others walkers."""
+    unknown = sorted(set(phones) - set(scenario.ids))
+    if unknown:
+        raise BusError(
+            f"{scenario.source}: there is no agent {unknown[0]!r} to give a phone; the agents are "
+            f"{', '.join(scenario.ids)}"
+        )
+    found = {GROUND: "ground-station", LAUNCHER: "launcher"}
+    found |= {a: "phone" if a in phones else "walker" for a in scenario.ids}
+    found |= {u.id: "uav" for u in scenario.uavs}
+    return found
+
+
+def run_authority(out: Path, scenario: Scenario, given: Path | None, phones: tuple[str, ...] = ()) -> Path:
+    """The certificate directory of a run into ``out``: ``given`` if it covers every
+    peer of ``scenario`` in its role (a sentence naming the first that it
+    does not, otherwise), else a new authority in ``out/certs``."""
+    wanted = members(scenario, phones)
+    if given is None:
+        directory = make_authority(out / "certs", wanted)
+        (directory / f"{AUTHORITY}.key").unlink()  # nobody issues more for a run of its own
+        return directory
+    held = members_of(given)
+    for name, role in wanted.items():
+        if name not in held:
+            raise BusError(
+                f"{given} holds no valid certificate for {role} {name!r}; "
+                f"bearcat certs init {given} --scenario {scenario.name} issues the missing ones"
+            )
+        if held[name].role != role:
+            raise BusError(f"the certificate of {name!r} in {given} is for a {held[name].role}, not a {role}")
+    return given
+
+
+def spend(directory: Path) -> None:
+    """Delete the private keys of a run's own authority: the run is over."""
+    for key in directory.glob("*.key"):
+        key.unlink(missing_ok=True)
+
+
+def add_to(directory: Path, scenario: Scenario, phones: tuple[str, ...] = (), hosts: tuple[str, ...] = ()) -> dict:
+    """Issue into ``directory`` (making its authority if it has none) a
+    certificate for every peer of ``scenario`` it lacks; which it issued."""
+    wanted = members(scenario, phones)
+    if not (directory / f"{AUTHORITY}.pem").exists():
+        make_authority(directory, wanted, hosts=hosts)
+        return wanted
+    held = members_of(directory)
+    missing = {name: role for name, role in wanted.items() if name not in held}
+    add_members(directory, missing, hosts=hosts)
+    return missing
