@@ -35,6 +35,8 @@ COMMANDS = {
     "check": ("check", "say which invariants a run directory shows held"),
     "faults": ("faults", "run a fault-injection suite and check every run"),
     "peer": ("live", "start one peer by hand (a person at a keyboard, or against real hardware)"),
+    "phone": ("live", "let a person play from a real phone's browser"),
+    "certs": ("certs", "make the certificates a guarded game's peers present"),
     "study": (
         "study",
         "the fake-out, go/no-go and UAV search studies of thesis 3.5 and 6.2.4, as batches of simulated games",

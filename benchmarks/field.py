@@ -5,6 +5,7 @@ the wall clock, and the fix-to-guidance latency over Zenoh on loopback.
     python benchmarks/field.py --phones 10     # latency with 10 phones only
     python benchmarks/field.py --simulate-only
     sudo python benchmarks/field.py --latency-only --kernel   # also every phone in its own namespace
+    python benchmarks/field.py --latency-only --phones 10 --secure   # also sealed, over tls/ with access control
 
 Latency: N phone processes each publish a GPS fix ten times a second and
 wait for the guidance that answers it; the ground station (the real
@@ -19,6 +20,10 @@ With ``--kernel`` the same measurement runs again with every phone in a
 network namespace of its own behind a kernel network under ``ideal`` (as
 ``bearcat run --network kernel`` places them, clients of the ground station
 as a router): what the namespaces, the hub and its packet queue cost.
+With ``--secure`` it runs again as ``bearcat run --secure`` joins peers:
+every message sealed and checked (``bus.identity``), every phone a client
+of the ground station as a router over ``tls/`` with mutual TLS and the
+access control list (``bus.access``); the echo then goes over TLS too.
 Targets: p99 under 20 ms with 10 phones and no fix unanswered; ``simulate``
 at least 50x faster than real time for a 1 vs 1 game with 10 Hz guidance.
 """
@@ -46,12 +51,17 @@ STARTUP = 120.0  # s for every phone to come up
 
 def phone(args) -> None:
     """One phone process: fixes at 10 Hz, latencies of their answers to a JSON file."""
+    import zenoh
+
     from bearcat.bus import keys
     from bearcat.bus.codec import decode, encode
+    from bearcat.bus.identity import Credentials
     from bearcat.bus.messages import Fix, Guidance
     from bearcat.bus.zenoh_session import ZenohSession, config
 
-    with ZenohSession(args.phone, config(connect=[args.connect], listen=[], mode=args.mode)) as session:
+    credentials = Credentials(args.certs, args.phone) if args.certs else None
+    how = config(connect=[args.connect], listen=[], mode=args.mode, tls=credentials)
+    with ZenohSession(args.phone, how, credentials=credentials) as session, zenoh.open(how) as bare:
         sent: dict[float, float] = {}
         latencies: list[float] = []
         echo_rtts: list[float] = []
@@ -68,15 +78,15 @@ def phone(args) -> None:
                             for t in [t for t in sent if t <= r.t]:
                                 latencies.append(now - sent.pop(t))
 
-        def on_echo(key, payload, sender):
-            echo_rtts.append(time.time() - float(payload.decode()))
+        def on_echo(sample):
+            echo_rtts.append(time.time() - float(sample.payload.to_bytes().decode()))
 
         session.subscribe(keys.guidance(GAME, args.phone), on_guidance)
-        session.subscribe(f"bench/echo/{args.phone}/back", on_echo)
+        taps = [bare.declare_subscriber(f"bench/echo/{args.phone}/back", on_echo)]
         # Every phone starts on the ground station's word, once all are up: in
         # namespaces the set-up of fifty takes longer than one's warm-up.
         started = threading.Event()
-        session.subscribe(START_KEY, lambda key, payload, sender: started.set())
+        taps.append(bare.declare_subscriber(START_KEY, lambda sample: started.set()))
         session.declare_token(keys.alive(GAME, "phone", args.phone))
         if not started.wait(STARTUP):
             raise SystemExit(f"phone {args.phone}: no start in {STARTUP:g} s")
@@ -94,28 +104,58 @@ def phone(args) -> None:
                 encode(Fix(agent=args.phone, seq=seq, t=t, lat=lat, lon=lon)),
                 reliable=False,
             )
-            session.put(f"bench/echo/{args.phone}/out", str(time.time()).encode(), reliable=False)
+            bare.put(
+                f"bench/echo/{args.phone}/out",
+                str(time.time()).encode(),
+                congestion_control=zenoh.CongestionControl.DROP,
+            )
             due += 0.1
             time.sleep(max(due - time.monotonic(), 0))
         time.sleep(1.0)
+        for tap in taps:
+            tap.undeclare()
     Path(args.out).write_text(
         json.dumps({"latencies": latencies, "sent": seq, "answered": len(latencies), "echo": echo_rtts})
     )
 
 
-def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -> dict:
+def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False, secure: bool = False) -> dict:
+    import zenoh
+
     from bearcat.agents.ground_station.guidance import GuidanceService
     from bearcat.bus import keys
+    from bearcat.bus.access import access_control
     from bearcat.bus.codec import Inbox
+    from bearcat.bus.identity import Credentials, make_authority
     from bearcat.bus.zenoh_session import ZenohSession, config
     from bearcat.maps import load_map
     from bearcat.scenarios.launch import free_port
     from bearcat.scenarios.live import run_peer
 
     port = free_port()
-    endpoint = f"tcp/127.0.0.1:{port}"
+    scheme = "tls" if secure else "tcp"
+    endpoint = f"{scheme}/127.0.0.1:{port}"
     ids = [f"p{k}" for k in range(n)]
     hub = "router" if mode == "client" else "peer"
+    certs = tls = echo_tls = access = None
+    if secure:
+        certs = Path(tempfile.mkdtemp(prefix="bench-certs-")) / "certs"
+        members = {"gs": "ground-station", "echo": "launcher", **dict.fromkeys(ids, "phone")}
+        make_authority(certs, members)
+        tls, echo_tls = Credentials(certs, "gs"), Credentials(certs, "echo")
+        access = access_control(GAME, members)
+        # The bare-Zenoh echo and the start signal are not the game's: allowed to all.
+        access["rules"].append(
+            {
+                "id": "bench",
+                "permission": "allow",
+                "flows": ["ingress", "egress"],
+                "messages": ["put", "declare_subscriber"],
+                "key_exprs": ["bench/**"],
+            }
+        )
+        for policy in access["policies"]:
+            policy["rules"].append("bench")
     network = contextlib.nullcontext()
     if kernel:
         from bearcat.netem.kernel.network import KernelNetwork
@@ -125,11 +165,28 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -
     with (
         network,
         ZenohSession(
-            "gs", config(listen=[endpoint] + ([f"tcp/{network.router}:{port}"] if kernel else []), mode=hub)
+            "gs",
+            config(
+                listen=[endpoint] + ([f"{scheme}/{network.router}:{port}"] if kernel else []),
+                mode=hub,
+                tls=tls,
+                access=access,
+            ),
+            credentials=tls,
         ) as session,
-        ZenohSession("echo", config(connect=[endpoint], listen=[] if mode == "client" else None, mode=mode)) as echo,
+        zenoh.open(
+            config(connect=[endpoint], listen=[] if mode == "client" else None, mode=mode, tls=echo_tls)
+        ) as echo,
     ):
-        echo.subscribe("bench/echo/*/out", lambda k, p, s: echo.put(k.rsplit("/", 1)[0] + "/back", p, reliable=False))
+
+        def back(sample):
+            echo.put(
+                str(sample.key_expr).rsplit("/", 1)[0] + "/back",
+                sample.payload.to_bytes(),
+                congestion_control=zenoh.CongestionControl.DROP,
+            )
+
+        echoing = echo.declare_subscriber("bench/echo/*/out", back)
         service = GuidanceService(GAME, load_map("field-50"), ids, rate=10.0)
         received: dict[str, set] = {pid: set() for pid in ids}
 
@@ -151,11 +208,12 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -
                     f"{tmp}/{pid}.json",
                     "--mode",
                     mode,
+                    *(["--certs", str(certs)] if certs else []),
                 ]
 
             if kernel:
                 procs = [
-                    network.spawn(pid, command(pid, f"tcp/{network.router}:{port}"), log_file=subprocess.DEVNULL)
+                    network.spawn(pid, command(pid, f"{scheme}/{network.router}:{port}"), log_file=subprocess.DEVNULL)
                     for pid in ids
                 ]
             else:
@@ -166,7 +224,7 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -
                 deadline = time.monotonic() + STARTUP
                 while sum("/phone/" in k for k in seen) < n and time.monotonic() < deadline:
                     await asyncio.sleep(0.05)
-                session.put(START_KEY, b"")
+                echo.put(START_KEY, b"")
                 await asyncio.sleep(duration + 12.0)
                 task.cancel()
                 await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
@@ -175,6 +233,7 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False) -
             for p in procs:
                 p.wait(timeout=60)
             results = [json.loads(Path(f"{tmp}/{pid}.json").read_text()) for pid in ids]
+        echoing.undeclare()
     lat = np.concatenate([r["latencies"] for r in results]) * 1e3
     rtt = np.concatenate([r["echo"] for r in results]) * 1e3
     sent = sum(r["sent"] for r in results)
@@ -225,6 +284,12 @@ def main() -> None:
     parser.add_argument(
         "--kernel", action="store_true", help="measure again with every phone in a namespace (root; clients)"
     )
+    parser.add_argument(
+        "--secure",
+        action="store_true",
+        help="measure again sealed, with the phones clients over tls/ and the router's access control",
+    )
+    parser.add_argument("--certs", help=argparse.SUPPRESS)
     parser.add_argument("--phone", help=argparse.SUPPRESS)
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--warmup", type=float, default=3.0, help=argparse.SUPPRESS)
@@ -243,11 +308,13 @@ def main() -> None:
         print(
             "fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)"
         )
-        runs = [(n, args.mode, False) for n in args.phones]
-        runs += [(n, "client", True) for n in args.phones] if args.kernel else []
-        for n, mode, kernel in runs:
-            r = latency(n, args.duration, mode, kernel)
+        runs = [(n, args.mode, False, False) for n in args.phones]
+        runs += [(n, "client", True, False) for n in args.phones] if args.kernel else []
+        runs += [(n, "client", False, True) for n in args.phones] if args.secure else []
+        for n, mode, kernel, secure in runs:
+            r = latency(n, args.duration, mode, kernel, secure)
             where = "namespaces, kernel network" if kernel else "loopback"
+            where += ", sealed over tls/ with access control" if secure else ""
             print(
                 f"  {n:3d} phones ({mode}s, {where}): {r['fixes']} fixes, {r['lost']} lost, "
                 f"{r['unanswered']} unanswered; "

@@ -75,8 +75,13 @@ def config(
     mode: str = "peer",
     multicast: bool = False,
     lease_ms: int = LEASE_MS,
+    tls: Credentials | None = None,
+    access: dict | None = None,
 ) -> zenoh.Config:
-    """A Zenoh configuration; ``listen`` defaults to an ephemeral loopback port."""
+    """A Zenoh configuration; ``listen`` defaults to an ephemeral loopback port.
+    With ``tls``, its ``tls/`` links present that peer's certificate and
+    accept only peers whose certificates its authority issued (mutual TLS);
+    ``access`` is a router's access control (``bus.access``)."""
     if mode not in ("peer", "client", "router"):
         raise BusError(f"zenoh mode {mode!r} is not peer, client or router")
     listen = [LOOPBACK_LISTEN] if listen is None else list(listen)
@@ -92,6 +97,10 @@ def config(
         c.insert_json5("connect/endpoints", json.dumps(connect))
         c.insert_json5("transport/link/tx/lease", json.dumps(int(lease_ms)))
         c.insert_json5("timestamping/enabled", "true")
+        if tls is not None:
+            c.insert_json5("transport/link/tls", json.dumps(_mutual_tls(tls)))
+        if access is not None:
+            c.insert_json5("access_control", json.dumps(access))
         if connect and all(endpoint.startswith("udp/") for endpoint in connect):
             c.insert_json5("connect/timeout_ms", json.dumps(DATAGRAM_CONNECT_MS))
             c.insert_json5("connect/retry", json.dumps(DATAGRAM_RETRY))
@@ -309,6 +318,18 @@ class ZenohSession:
     def _check_open(self) -> None:
         if self.closed:
             raise BusError(f"session {self.name!r} is closed")
+
+
+def _mutual_tls(credentials: Credentials) -> dict:
+    """Zenoh's TLS link settings for a peer that presents its certificate both ways and trusts only its authority."""
+    return {
+        "root_ca_certificate": str(credentials.authority),
+        "enable_mtls": True,
+        "listen_certificate": str(credentials.certificate),
+        "listen_private_key": str(credentials.private_key),
+        "connect_certificate": str(credentials.certificate),
+        "connect_private_key": str(credentials.private_key),
+    }
 
 
 def _claimed(attachment: bytes) -> str:

@@ -11,6 +11,8 @@ certificates stay as the record of who played.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 from bearcat.bus.errors import BusError
@@ -34,15 +36,29 @@ def members(scenario: Scenario, phones: tuple[str, ...] = ()) -> dict[str, str]:
     return found
 
 
-def run_authority(out: Path, scenario: Scenario, given: Path | None, phones: tuple[str, ...] = ()) -> Path:
-    """The certificate directory of a run into ``out``: ``given`` if it covers every
-    peer of ``scenario`` in its role (a sentence naming the first that it
-    does not, otherwise), else a new authority in ``out/certs``."""
+@contextmanager
+def run_authority(
+    out: Path, scenario: Scenario, given: Path | None, *, phones: tuple[str, ...] = (), hosts: tuple[str, ...] = ()
+) -> Iterator[Path]:
+    """``with run_authority(...) as directory:`` the certificates of a run into
+    ``out``: ``given`` if it covers every peer of ``scenario`` in its role (a
+    sentence naming the first that it does not, otherwise), else a new
+    authority in ``out/certs`` whose certificates name ``hosts`` too (where
+    the router listens), spent when the run is over."""
+    if given is not None:
+        yield _covering(given, scenario, phones)
+        return
+    directory = make_authority(out / "certs", members(scenario, phones), hosts=hosts)
+    (directory / f"{AUTHORITY}.key").unlink()  # nobody issues more for a run of its own
+    try:
+        yield directory.resolve()
+    finally:
+        spend(directory)
+
+
+def _covering(given: Path, scenario: Scenario, phones: tuple[str, ...]) -> Path:
+    """``given``, if it holds a certificate for every peer of ``scenario`` in its role."""
     wanted = members(scenario, phones)
-    if given is None:
-        directory = make_authority(out / "certs", wanted)
-        (directory / f"{AUTHORITY}.key").unlink()  # nobody issues more for a run of its own
-        return directory
     held = members_of(given)
     for name, role in wanted.items():
         if name not in held:
@@ -52,7 +68,7 @@ def run_authority(out: Path, scenario: Scenario, given: Path | None, phones: tup
             )
         if held[name].role != role:
             raise BusError(f"the certificate of {name!r} in {given} is for a {held[name].role}, not a {role}")
-    return given
+    return given.resolve()
 
 
 def spend(directory: Path) -> None:

@@ -44,12 +44,14 @@ from pathlib import Path
 from bearcat.agents.ground_station.event_log import EventLog, read_events
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
+from bearcat.bus.access import access_control
 from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
-from bearcat.scenarios.credentials import run_authority, spend
+from bearcat.scenarios.credentials import members, run_authority
 from bearcat.scenarios.dispatch import FAILED
 from bearcat.scenarios.fault_effects import LAUNCHER
 from bearcat.scenarios.faults import GROUND, FaultError, refusal, write_faults
@@ -156,10 +158,16 @@ def launch(
     startup: float = STARTUP,
     faults: tuple | None = None,
     certs: Path | None = None,
+    secure: bool = False,
+    phones: tuple[str, ...] = (),
+    page: tuple[str, int] = ("0.0.0.0", 8443),
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
     ``certs`` a directory of certificates for every peer (``bearcat certs
     init``; default: a new authority for this run alone, in ``out/certs``);
+    ``secure`` puts the router on ``tls/`` with mutual TLS and the access
+    control list of ``bus.access``; the agents of ``phones`` are played from
+    real phones, whose pages are served from ``page`` (host, first port) on;
     ``transport`` is how best-effort messages travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim;
@@ -167,6 +175,11 @@ def launch(
     plan = scenario.faults if faults is None else tuple(faults)
     if (why := refusal(plan, "live")) is not None:
         raise FaultError(why)
+    transport = transport or scenario.transport
+    if secure and transport != "tcp":
+        raise BusError(
+            f"a --secure run carries everything over tls/, which is TCP: transport {transport!r} cannot be secured"
+        )
     full = next((f for f in plan if f.kind == "disk-full"), None)
     with SmallDisk(out, full.size) if full is not None else nullcontext() as disk:
         outcome = _play(
@@ -176,12 +189,15 @@ def launch(
             plan,
             seed=seed,
             netem=netem,
-            transport=transport or scenario.transport,
+            transport=transport,
             network=network,
             say=say,
             startup=startup,
             fill=None if disk is None else disk.fill,
             certs=certs,
+            secure=secure,
+            phones=phones,
+            page=page,
         )
     if full is not None:  # the disk is back: say what the full one could not take
         _rewrite_outcome(out, outcome)
@@ -193,39 +209,55 @@ def launch(
     return outcome
 
 
-def _play(scenario, scenario_ref, out, plan, *, certs, **how) -> LiveOutcome:
-    """Play under the run's authority; one made for the run is spent with it."""
-    out.mkdir(parents=True, exist_ok=True)
-    authority = run_authority(out, scenario, certs)
-    try:
-        return _play_sealed(scenario, scenario_ref, out, plan, certs=authority.resolve(), **how)
-    finally:
-        if certs is None:
-            spend(authority)
-
-
-def _play_sealed(
-    scenario, scenario_ref, out, plan, *, seed, netem, transport, network, say, startup, fill, certs
+def _play(
+    scenario,
+    scenario_ref,
+    out,
+    plan,
+    *,
+    seed,
+    netem,
+    transport,
+    network,
+    say,
+    startup,
+    fill,
+    certs,
+    secure,
+    phones,
+    page,
 ) -> LiveOutcome:
     """Start the peers, play, stop them; the outcome, written beside what the run recorded if the disk lets it."""
     lease_ms = round(1000 * scenario.lease)
+    out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     write_scenario(out, scenario)
-    plan_flags: tuple[str, ...] = ()
+    run_flags: tuple[str, ...] = ("--secure",) if secure else ()
     if plan:
         write_faults(out / "faults.toml", plan)
-        plan_flags = ("--faults", str((out / "faults.toml").resolve()))
+        run_flags += ("--faults", str((out / "faults.toml").resolve()))
     port = free_port()
-    places = KernelPeers(port, netem, seed, report=out / "network.json") if network == "kernel" else LocalPeers(port)
+    game = scenario.name
+    if network == "kernel":
+        places = KernelPeers(port, netem, seed, report=out / "network.json", secure=secure)
+    else:
+        places = LocalPeers(port, secure=secure)
     endpoint = places.loopback
     # The launcher is the hub: a router every peer joins as a client. A mesh
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
     with (
         places,
+        run_authority(out, scenario, certs, phones=phones, hosts=places.hosts) as certs,
         ZenohSession(
             LAUNCHER,
-            config(listen=places.listen, mode="router", lease_ms=lease_ms),
+            config(
+                listen=places.listen,
+                mode="router",
+                lease_ms=lease_ms,
+                tls=Credentials(certs, LAUNCHER) if secure else None,
+                access=access_control(game, members(scenario, phones)) if secure else None,
+            ),
             credentials=Credentials(certs, LAUNCHER),
         ) as session,
         closing(EventLog(out / "events.jsonl")) as record,
@@ -239,7 +271,6 @@ def _play_sealed(
         final: dict = {}
         alive: set[str] = set()
         lock = threading.Lock()
-        game = scenario.name
         injector: LiveFaults | None = None
 
         def within_budget(sender, key, now) -> bool:
@@ -284,7 +315,7 @@ def _play_sealed(
 
         keyboard = [a.id for a in scenario.agents if a.behaviour == "keyboard"]
         expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
-        expected |= {keys.alive(game, "walker", a.id) for a in scenario.agents}
+        expected |= {keys.alive(game, "phone" if a.id in phones else "walker", a.id) for a in scenario.agents}
         expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
         if scenario.uavs:
             expected.add(keys.alive(game, "ground-station", "uav-tasking"))
@@ -297,7 +328,7 @@ def _play_sealed(
                 return lambda at: [
                     *peer_command(role, scenario_ref, name, at, seed, netem, out, certs, transport),
                     *places.peer_flags,
-                    *plan_flags,
+                    *run_flags,
                     *extra,
                 ]
 
@@ -310,9 +341,10 @@ def _play_sealed(
                     extra = (*extra, "--resume")
                 return places.start(name, command(role, name, *extra), log, colocated=name == GROUND, again=again)
 
-            roles = [("ground-station", GROUND)] + [("walker", a.id) for a in scenario.agents if a.id not in keyboard]
-            for role, name in roles:
-                how[name] = (role, ())
+            how[GROUND] = ("ground-station", ("--judge", "fixes") if phones else ())
+            how |= {a.id: ("walker", ()) for a in scenario.agents if a.id not in keyboard and a.id not in phones}
+            how |= _pages(phones, page, out, say)
+            for name in list(how):
                 children[name] = start(name)
             for k, uav in enumerate(scenario.uavs):
                 port = free_port(socket.SOCK_DGRAM)
@@ -325,9 +357,12 @@ def _play_sealed(
             for name in keyboard:
                 say(
                     f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
-                    + " ".join(peer_command("walker", scenario_ref, name, endpoint, seed, netem, out, certs, transport))
+                    + " ".join(
+                        peer_command("walker", scenario_ref, name, endpoint, seed, netem, out, certs, transport)
+                        + (["--secure"] if secure else [])
+                    )
                 )
-            deadline = time.monotonic() + (startup if not keyboard else 10 * startup)
+            deadline = time.monotonic() + (startup if not (keyboard or phones) else 10 * startup)
             while True:
                 with lock:
                     missing = sorted(expected - alive)
@@ -385,6 +420,26 @@ def _play_sealed(
             record.note(time.time(), "outcome", **vars(outcome))
             _keep(out, outcome, record, say)
     return outcome
+
+
+def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path, say) -> dict[str, tuple]:
+    """How to start a page for each of ``phones`` (on successive ports from
+    ``page``), each with a token of its own, kept where only this user reads
+    it; and the link to each, said with its QR code."""
+    from bearcat.agents.human.browser_bridge import PageServer, new_token
+
+    how = {}
+    if phones:
+        (out / "phones").mkdir(mode=0o700, exist_ok=True)
+    for k, name in enumerate(phones):
+        server = PageServer(host=page[0], port=page[1] + k, token=new_token())
+        token_file = out / "phones" / f"{name}.token"
+        token_file.touch(mode=0o600)
+        token_file.write_text(server.token + "\n")
+        how[name] = ("phone", ("--page", f"{server.host}:{server.port}", "--token-file", str(token_file)))
+        say(f"agent {name} plays from a phone: open {server.url()} on it (the game waits for its first fix)")
+        say(server.qr())
+    return how
 
 
 def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:

@@ -129,7 +129,7 @@ async def run_peer(
                 loop.call_later(notice.end - now, lambda: [dispatch.clocks.pop(a.name, None) for a in agents])
         elif isinstance(fault, Gps):
             for agent in agents:
-                if agent.name == fault.target:
+                if agent.name == fault.target and hasattr(agent, "phone"):  # a real phone's GPS is its own
                     agent.phone.lie = lie(fault)
                     if notice.end is not None:
                         loop.call_later(notice.end - now, setattr, agent.phone, "lie", None)
@@ -154,7 +154,7 @@ async def run_peer(
 
             orphaned["timer"] = loop.call_later(lease, give_up)
 
-    if lease is not None and all(agent.role == "walker" for agent in agents):
+    if lease is not None and all(agent.role in ("walker", "phone") for agent in agents):
         session.subscribe_liveliness(
             keys.alive(game, "ground-station", GROUND_PEERS[0]), lambda k, alive: soon(ground, k, alive)
         )
@@ -218,11 +218,18 @@ def start_peer(
     faults: tuple = (),
     resume: bool = False,
     certs=None,
+    secure: bool = False,
+    page=None,
+    say=None,
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
     With ``certs``, a directory holding this peer's certificate and key, it
     seals what it sends and takes only what the access policy lets each
     provable sender publish; without, it believes every name (a private host).
+    A ``secure`` peer is a client of a router over ``tls/`` alone, presenting
+    that certificate. A "phone" peer is a person's real phone: it serves the
+    page of ``page`` (a ``PageServer``), tells ``say`` where, and joins the
+    game once the page has sent its first fix.
     ``faults`` is the run's fault plan; a peer restarted mid-game ``resume``s
     from its own log in ``out``.
     With ``transport`` "udp" its best-effort messages go to the same
@@ -269,6 +276,14 @@ def start_peer(
             uav_truth=emulated,
         )
         agents, name = [players.uavs[agent]], agent
+    elif role == "phone":
+        from bearcat.agents.human.page_phone import PagePhone
+
+        if agent not in scenario.ids:
+            raise ScenarioError(
+                f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
+            )
+        agents, name = [PagePhone(scenario.name, agent, scenario.map)], agent
     elif role == "walker":
         if agent not in scenario.ids:
             raise ScenarioError(
@@ -277,7 +292,7 @@ def start_peer(
         players = build_cast(scenario, profile, seed, people=[agent], ground=False)
         agents, name = [players.people[agent]], agent
     else:
-        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker or uav")
+        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker, phone or uav")
     if resume and out is not None:
         from bearcat.scenarios.recovery import last_sent
         from bearcat.scenarios.recovery import resume as take_up
@@ -287,19 +302,23 @@ def start_peer(
             take_up(agent, last, scenario.name)
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
+    credentials = None if certs is None else Credentials(certs, name)
+    if secure:
+        _check_secure(credentials, connect)
+        mode, listen = "client", []  # a peer that listens could be reached around the router's access control
     if mode == "client" and listen is None:
         listen = []  # a client does not listen
     with (
         closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl", append=True)) as record,
         ZenohSession(
             name,
-            config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms),
+            config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=credentials if secure else None),
             best_effort=None
             if transport == "tcp"
             else config(
                 listen=[], connect=[best_effort_endpoint(e) for e in connect], mode="client", lease_ms=lease_ms
             ),
-            credentials=None if certs is None else Credentials(certs, name),
+            credentials=credentials,
         ) as session,
     ):
         if role == "ground-station":
@@ -310,13 +329,18 @@ def start_peer(
             session.serve(keys.map_query(scenario.name), lambda: geojson)
             session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
         if zones is not None:
-            # Dead zones need every peer's position: in simulation the truth tells it.
+            # Dead zones need the position of each end of a link, which in
+            # simulation the truth tells: a player's peer needs only its own
+            # (the ground station's end stands still), the ground station every one.
             def on_truth(key, payload, sender):
                 message = Inbox(name).accept(key, payload)
                 if message is not None:
                     positions[message.agent] = scenario.map.to_local(message.lat, message.lon)
 
-            session.subscribe(keys.every(scenario.name, "truth"), on_truth)
+            every = role == "ground-station"
+            session.subscribe(
+                keys.every(scenario.name, "truth") if every else keys.truth(scenario.name, name), on_truth
+            )
         shim = Shim(
             profile.link if network == "shim" else LinkModel(),
             seed,
@@ -341,6 +365,8 @@ def start_peer(
             network=network,
             lease=scenario.lease,
         )
+        if role == "phone":
+            return asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))
         if autopilot is None:
             return asyncio.run(peer)
         with asyncio.Runner() as runner:
@@ -348,6 +374,47 @@ def start_peer(
             # that never will (its vehicle died) must not keep the peer alive.
             runner.get_loop().set_default_executor(DaemonExecutor())
             return runner.run(_fly(autopilot, peer))
+
+
+async def _bridged(phone, page, peer, record, say) -> str:
+    """Serve ``phone``'s page, then play once the page has sent a fix; stop serving in every case."""
+    from bearcat.agents.human.browser_bridge import Bridge
+    from bearcat.bus.errors import BusError
+
+    def dropped(reason: str) -> None:
+        n = sum(phone.drops.values())
+        if n == 1 or n % 100 == 0:
+            log.warning("phone %s dropped a fix from its page (%d so far): %s", phone.name, n, reason)
+        record.refused(time.time(), phone.name, phone.name, keys.fix(phone.game, phone.name), reason)
+
+    bridge = Bridge(phone, page, time.time, on_drop=dropped)
+    playing = False
+    try:
+        try:
+            await bridge.start()
+        except OSError as exc:
+            raise BusError(
+                f"phone {phone.name}: its page cannot be served at {page.host}:{page.port}: {exc.strerror or exc}"
+            ) from None
+        say(f"phone {phone.name}: open {page.url()} on the phone; the game waits for its first fix")
+        await bridge.first_fix.wait()
+        playing = True
+        return await peer
+    finally:
+        if not playing:
+            peer.close()
+        await bridge.close()
+
+
+def _check_secure(credentials, connect) -> None:
+    """A sentence for a secure peer that could not be one."""
+    from bearcat.bus.errors import BusError
+
+    if credentials is None:
+        raise BusError("a --secure peer needs --certs DIR, the directory holding its certificate and key")
+    plain = [endpoint for endpoint in connect if not endpoint.startswith("tls/")]
+    if not connect or plain:
+        raise BusError(f"a --secure peer connects to a router over tls/ only, not {', '.join(plain) or 'nothing'}")
 
 
 class DaemonExecutor(concurrent.futures.ThreadPoolExecutor):
@@ -399,9 +466,12 @@ async def _fly(autopilot, peer) -> str:
 GROUND_PEERS = ("gs", "referee", "launcher")
 
 
-def fetch_scenario(game: str, connect, timeout: float = 10.0, *, certs=None, name: str | None = None):
+def fetch_scenario(
+    game: str, connect, timeout: float = 10.0, *, certs=None, name: str | None = None, secure: bool = False
+):
     """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``);
-    with ``certs``, asked as peer ``name`` and taken only from a provable ground station."""
+    with ``certs``, asked as peer ``name`` and taken only from a provable ground station (over
+    ``tls/`` when ``secure``)."""
     import time
 
     from bearcat.bus.errors import BusError
@@ -412,7 +482,10 @@ def fetch_scenario(game: str, connect, timeout: float = 10.0, *, certs=None, nam
 
     credentials = None if certs is None else Credentials(certs, name)
     asker = f"fetch-{int(time.time() * 1000) % 10**9}" if credentials is None else credentials.name
-    with ZenohSession(asker, config(connect=connect), credentials=credentials) as session:
+    if secure:
+        _check_secure(credentials, connect)
+    how = config(connect=connect, **({"listen": [], "mode": "client", "tls": credentials} if secure else {}))
+    with ZenohSession(asker, how, credentials=credentials) as session:
         end = time.monotonic() + timeout
         text = geojson = None
         while time.monotonic() < end and (text is None or geojson is None):

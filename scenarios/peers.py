@@ -24,12 +24,14 @@ NETWORKS = ("shim", "kernel")
 
 
 class LocalPeers:
-    """Peers on this host's network; the router listens on the loopback at ``port``."""
+    """Peers on this host's network; the router listens on the loopback at
+    ``port``, over ``tls/`` alone when ``secure``."""
 
     peer_flags: tuple[str, ...] = ()  # what a peer is told of the network it runs on
 
-    def __init__(self, port: int) -> None:
-        self.loopback = f"tcp/127.0.0.1:{port}"
+    def __init__(self, port: int, *, secure: bool = False) -> None:
+        self.secure = secure
+        self.loopback = f"{'tls' if secure else 'tcp'}/127.0.0.1:{port}"
 
     def __enter__(self) -> LocalPeers:
         return self
@@ -39,8 +41,14 @@ class LocalPeers:
 
     @property
     def listen(self) -> list[str]:
-        """The router's endpoints: tcp/ for everything, udp/ for best-effort traffic that asks for it."""
-        return [self.loopback, best_effort_endpoint(self.loopback)]
+        """The router's endpoints: tcp/ for everything, udp/ for best-effort
+        traffic that asks for it; tls/ alone on a secure run."""
+        return [self.loopback] if self.secure else [self.loopback, best_effort_endpoint(self.loopback)]
+
+    @property
+    def hosts(self) -> tuple[str, ...]:
+        """The addresses peers reach the router at, which its certificate must name."""
+        return ("127.0.0.1",)
 
     def start(
         self, name: str, command: Callable[[str], list[str]], log: Path, *, colocated: bool = False, again: bool = False
@@ -71,10 +79,10 @@ class KernelPeers(LocalPeers):
 
     peer_flags = ("--network", "kernel")
 
-    def __init__(self, port: int, netem: str, seed: int, report: Path) -> None:
+    def __init__(self, port: int, netem: str, seed: int, report: Path, *, secure: bool = False) -> None:
         from bearcat.netem.kernel.network import KernelNetwork
 
-        super().__init__(port)
+        super().__init__(port, secure=secure)
         self.port = port
         self.network = KernelNetwork(netem, seed, report=report)
 
@@ -86,15 +94,25 @@ class KernelPeers(LocalPeers):
         self.network.__exit__(*exc)
 
     @property
+    def outside(self) -> str:
+        """The router's endpoint on the kernel network."""
+        return f"{'tls' if self.secure else 'tcp'}/{self.network.router}:{self.port}"
+
+    @property
     def listen(self) -> list[str]:
-        outside = f"tcp/{self.network.router}:{self.port}"
-        return [*super().listen, outside, best_effort_endpoint(outside)]
+        if self.secure:
+            return [*super().listen, self.outside]
+        return [*super().listen, self.outside, best_effort_endpoint(self.outside)]
+
+    @property
+    def hosts(self) -> tuple[str, ...]:
+        return (*super().hosts, self.network.router)
 
     def start(self, name, command, log, *, colocated=False, again=False) -> subprocess.Popen:
         if colocated:
             return super().start(name, command, log, again=again)
         with open(log, "a" if again else "w") as output:
-            return self.network.spawn(name, command(f"tcp/{self.network.router}:{self.port}"), log_file=output)
+            return self.network.spawn(name, command(self.outside), log_file=output)
 
     def start_vehicle(self, flyer, command, log) -> subprocess.Popen:
         with open(log, "w") as output:

@@ -79,7 +79,7 @@ class Phone:
         self.period = 1.0 / fix_rate
         self.gps = GpsTrack(gps, rng)
         self.compass = CompassTrack(compass, rng)
-        self.screen = Screen()
+        self.display = Display(game_map)
         self.seq = 0
         self.next_fix = float(rng.uniform(0.0, self.period))  # phones are not in step with each other
         self._buildings = shapely.union_all(game_map.obstacles) if game_map.obstacles else None
@@ -89,8 +89,6 @@ class Phone:
         # A GPS fault: ("jump", offset), ("freeze", anything) or ("spoof", position), metres.
         self.lie: tuple[str, tuple[float, float]] | None = None
         self._told: tuple[float, float] | None = None  # the last position a fix reported, in metres
-        self._region_shown: list = []
-        self._region_local: list[np.ndarray] = []
 
     def fix(self, now: float, position, heading: float | None) -> Fix | None:
         """A fix of the true ``position`` (metres) and ``heading`` (radians from
@@ -133,6 +131,25 @@ class Phone:
 
     def show(self, guidance: Guidance, now: float) -> None:
         """Put a guidance message on the screen (an older one than shown is ignored)."""
+        self.display.show(guidance, now)
+
+    @property
+    def screen(self) -> Screen:
+        return self.display.screen
+
+
+class Display:
+    """What puts guidance on a ``Screen`` of ``game_map``: the emulated phone's
+    and the browser phone's alike."""
+
+    def __init__(self, game_map: Map) -> None:
+        self.map = game_map
+        self.screen = Screen()
+        self._region_shown: list = []
+        self._region_local: list[np.ndarray] = []
+
+    def show(self, guidance: Guidance, now: float) -> None:
+        """Put ``guidance`` on the screen at ``now`` (an older one than shown is ignored)."""
         s = self.screen
         if s.computed_at is not None and guidance.t < s.computed_at:
             return

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import argparse
 from contextlib import nullcontext
 from pathlib import Path
 
@@ -53,6 +54,27 @@ def register(subparsers) -> None:
         metavar="DIR",
         help="certificates of every peer (bearcat certs init); default: a new authority for this run alone",
     )
+    run.add_argument(
+        "--secure",
+        action="store_true",
+        help="a guarded bus: the router takes only tls/ links with a certificate from the run's authority, and "
+        "lets each peer publish and read only what its role may (default-deny access control)",
+    )
+    run.add_argument(
+        "--phone",
+        action="append",
+        default=[],
+        metavar="AGENT",
+        help="a person plays AGENT from a real phone (repeatable): its page is served instead of a walker, the "
+        "link printed, and the game waits for the phone's first fix; the referee judges on fixes",
+    )
+    run.add_argument(
+        "--page",
+        type=_address,
+        default=("0.0.0.0", 8443),
+        metavar="HOST:PORT",
+        help="where the phones' pages are served (default 0.0.0.0:8443; the next phone on the next port)",
+    )
     run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
     run.set_defaults(run=run_live)
@@ -84,7 +106,7 @@ def register(subparsers) -> None:
         description="Start one peer of a scenario: the ground station (referee, guidance and UAV tasking), one "
         "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
     )
-    peer.add_argument("role", choices=("ground-station", "walker", "uav"))
+    peer.add_argument("role", choices=("ground-station", "walker", "phone", "uav"))
     peer.add_argument(
         "--scenario",
         required=True,
@@ -142,6 +164,11 @@ def register(subparsers) -> None:
         "it sends with ID.key and believes only senders the authority vouches for; without it, every name",
     )
     peer.add_argument(
+        "--secure",
+        action="store_true",
+        help="join a guarded bus: a client of the router over tls/ only, presenting ID.pem from --certs",
+    )
+    peer.add_argument(
         "--faults", type=Path, metavar="FILE", help="the run's fault plan: apply the faults the launcher announces"
     )
     peer.add_argument(
@@ -163,7 +190,23 @@ def register(subparsers) -> None:
         action="store_true",
         help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see",
     )
+    _page_arguments(peer, listen="--page")
     peer.set_defaults(run=run_peer)
+
+    phone = subparsers.add_parser(
+        "phone",
+        description="Let a person play from a real phone: serve a page to the phone's browser over HTTPS and "
+        "bridge it to the game (its GPS and compass as fixes, the ground station's guidance on its screen). "
+        "Prints the link and a QR code to open on the phone.",
+    )
+    phone.add_argument("--connect", action="append", required=True, metavar="ENDPOINT", help="the game's router")
+    phone.add_argument("--game", required=True, metavar="GAME", help="the game (its ground station serves the map)")
+    phone.add_argument("--id", required=True, metavar="AGENT", help="the agent this person plays")
+    phone.add_argument("--certs", type=Path, metavar="DIR", help="the game's certificates (as for bearcat peer)")
+    phone.add_argument("--secure", action="store_true", help="join a guarded bus over tls/ (as for bearcat peer)")
+    phone.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
+    _page_arguments(phone, listen="--listen")
+    phone.set_defaults(run=run_phone)
 
 
 def run_live(args) -> int:
@@ -194,6 +237,9 @@ def run_live(args) -> int:
             say=lambda text: print(text, flush=True),
             faults=plan,
             certs=args.certs,
+            secure=args.secure,
+            phones=tuple(args.phone),
+            page=args.page,
         )
     who = f"{outcome.winner} wins" if outcome.winner else "no winner"
     print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
@@ -241,7 +287,9 @@ def run_peer(args) -> int:
 
     name = args.id if args.role != "ground-station" else GROUND
     if args.scenario.startswith("zenoh:"):
-        scenario = fetch_scenario(args.scenario[len("zenoh:") :], args.connect, certs=args.certs, name=name)
+        scenario = fetch_scenario(
+            args.scenario[len("zenoh:") :], args.connect, certs=args.certs, name=name, secure=args.secure
+        )
     else:
         scenario = load_scenario(args.scenario)
     if args.role == "ground-station":
@@ -267,9 +315,62 @@ def run_peer(args) -> int:
             faults=plan,
             resume=args.resume,
             certs=args.certs,
+            secure=args.secure,
+            page=_page_server(args) if args.role == "phone" else None,
+            say=lambda text: print(text, flush=True),
         )
     print(f"peer {name}: {reason}", flush=True)
     return 0
+
+
+def run_phone(args) -> int:
+    """``bearcat phone``: ``bearcat peer phone`` with the scenario fetched from the game's ground station."""
+    args.role, args.scenario, args.mode, args.listen = "phone", f"zenoh:{args.game}", "client", None
+    args.faults = args.resume = args.vehicle = args.sysid = None
+    args.seed = args.netem = args.transport = None
+    args.network, args.judge, args.emulated = "shim", "fixes", False
+    server = _page_server(args)
+    print(f"open {server.url()} on the phone of {args.id}\n{server.qr()}", flush=True)
+    return run_peer(args)
+
+
+def _page_arguments(parser, *, listen: str) -> None:
+    """The options of a real phone's page: where it is served, its certificate, its token."""
+    parser.add_argument(
+        listen,
+        dest="listen_page",
+        type=_address,
+        default=("0.0.0.0", 8443),
+        metavar="HOST:PORT",
+        help="phone: where its page is served over HTTPS (default 0.0.0.0:8443)",
+    )
+    parser.add_argument("--cert", type=Path, metavar="FILE", help="phone: the page's HTTPS certificate (PEM)")
+    parser.add_argument(
+        "--key", type=Path, metavar="FILE", help="phone: its key; without --cert/--key, one is made for the session"
+    )
+    parser.add_argument(
+        "--token-file",
+        type=Path,
+        metavar="FILE",
+        help="phone: the secret the page's link carries (default: a new one, printed in the link)",
+    )
+
+
+def _page_server(args):
+    from bearcat.agents.human.browser_bridge import PageServer, new_token
+
+    if (args.cert is None) != (args.key is None):
+        raise arguments.UsageError("--cert and --key go together: the page's certificate and its key")
+    token = args.token_file.read_text().strip() if args.token_file else new_token()
+    host, port = args.listen_page
+    return PageServer(host=host, port=port, token=token, cert=args.cert, key=args.key)
+
+
+def _address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT, e.g. 0.0.0.0:8443")
+    return host, int(port)
 
 
 def _reference(text: str) -> str:

@@ -1,0 +1,218 @@
+"""The bridge between a phone's browser and the bus: an HTTPS server with a WebSocket.
+
+A phone's browser gives a page its position only in a secure context, so
+the bridge serves HTTPS: with the certificate the user gives, or one it
+makes for the session (the phone then asks once whether to trust it). The
+page's link carries a per-player token; a request without it gets nothing,
+so the person next to you cannot open your page or speak for you. What the
+page sends goes to the ``PagePhone`` agent (which checks every fix as any
+fix is checked); four times a second every open page gets the screen.
+
+Everything here runs on the peer's asyncio loop, beside the live runtime
+driving the agent.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import datetime
+import hmac
+import ipaddress
+import json
+import logging
+import secrets
+import socket
+import ssl
+import tempfile
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+from aiohttp import WSMsgType, web
+
+from bearcat.agents.human.page_phone import PagePhone
+
+log = logging.getLogger(__name__)
+
+REFRESH = 0.25  # s between the screens sent to each open page
+MAX_MESSAGE = 4096  # bytes: a fix is about a hundred
+
+
+@dataclass(frozen=True)
+class PageServer:
+    """Where the bridge listens and how a page proves it is the player's:
+    ``token`` in its link; ``cert``/``key`` the HTTPS certificate (None:
+    one made for the session, naming ``host``)."""
+
+    host: str = "0.0.0.0"
+    port: int = 8443
+    token: str = ""
+    cert: Path | None = None
+    key: Path | None = None
+
+    def url(self, address: str | None = None) -> str:
+        return f"https://{address or reachable(self.host)}:{self.port}/?token={self.token}"
+
+    def qr(self) -> str:
+        """The link as a QR code for a terminal, to point the phone's camera at."""
+        import io
+
+        import segno
+
+        out = io.StringIO()
+        segno.make(self.url(), error="l").terminal(out=out, compact=True)
+        return out.getvalue()
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(16)
+
+
+def reachable(host: str) -> str:
+    """The address a phone on the same network reaches ``host`` at: ``host``
+    itself unless it is every interface, else the one this machine's default
+    route leaves by (a datagram socket's connect sends nothing)."""
+    if host not in ("0.0.0.0", "", "::"):
+        return host
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+        try:
+            probe.connect(("10.255.255.255", 1))
+            return probe.getsockname()[0]
+        except OSError:
+            return "127.0.0.1"
+
+
+class Bridge:
+    """Serves ``page`` (the agent) to browsers as ``server`` says; ``now()`` is the peer's clock."""
+
+    def __init__(self, page: PagePhone, server: PageServer, now, *, on_drop=None) -> None:
+        self.page = page
+        self.server = server
+        self.now = now
+        self.on_drop = on_drop or (lambda reason: None)
+        self.first_fix = asyncio.Event()
+        self.sockets: set[web.WebSocketResponse] = set()
+        self._runner: web.AppRunner | None = None
+        self._pusher: asyncio.Task | None = None
+        self._index = resources.files("bearcat.agents.human").joinpath("page/index.html").read_bytes()
+
+    async def start(self) -> None:
+        app = web.Application(client_max_size=MAX_MESSAGE)
+        app.add_routes(
+            [
+                web.get("/", self._index_page),
+                web.get("/ws", self._socket),
+                web.get("/favicon.ico", lambda request: web.Response(status=204)),
+            ]
+        )
+        self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
+        await self._runner.setup()
+        site = web.TCPSite(self._runner, self.server.host, self.server.port, ssl_context=self._tls())
+        await site.start()
+        self._pusher = asyncio.create_task(self._push())
+
+    async def close(self) -> None:
+        if self._pusher is not None:
+            self._pusher.cancel()
+            await asyncio.gather(self._pusher, return_exceptions=True)
+        for ws in list(self.sockets):
+            await ws.close()
+        if self._runner is not None:
+            await self._runner.cleanup()
+
+    def _allowed(self, request: web.Request) -> bool:
+        given = request.query.get("token", "")
+        return bool(self.server.token) and hmac.compare_digest(given.encode(), self.server.token.encode())
+
+    async def _index_page(self, request: web.Request) -> web.Response:
+        if not self._allowed(request):
+            return web.Response(status=403, text="This link lacks its player's token: open the link you were given.")
+        return web.Response(body=self._index, content_type="text/html", headers={"Cache-Control": "no-store"})
+
+    async def _socket(self, request: web.Request) -> web.StreamResponse:
+        if not self._allowed(request):
+            return web.Response(status=403, text="no token")
+        ws = web.WebSocketResponse(heartbeat=10.0, max_msg_size=MAX_MESSAGE)
+        await ws.prepare(request)
+        self.sockets.add(ws)
+        try:
+            await ws.send_json({"type": "map", "map": self.page.map_view()})
+            await ws.send_json({"type": "view", "view": self.page.view(self.now())})
+            async for message in ws:
+                if message.type == WSMsgType.TEXT:
+                    self._received(message.data)
+        finally:
+            self.sockets.discard(ws)
+        return ws
+
+    def _received(self, text: str) -> None:
+        try:
+            data = json.loads(text)
+        except ValueError:
+            data = None
+        if not isinstance(data, dict) or data.pop("type", None) != "fix":
+            self.page.drops["not a fix"] += 1
+            self.on_drop("the page sent something that is not a fix")
+            return
+        why = self.page.report(data, self.now())
+        if why is None:
+            self.first_fix.set()
+        else:
+            self.on_drop(why)
+
+    async def _push(self) -> None:
+        while True:
+            await asyncio.sleep(REFRESH)
+            if not self.sockets:
+                continue
+            text = json.dumps({"type": "view", "view": self.page.view(self.now())})
+            for ws in list(self.sockets):
+                try:
+                    await ws.send_str(text)
+                except (ConnectionError, RuntimeError):
+                    self.sockets.discard(ws)
+
+    def _tls(self) -> ssl.SSLContext:
+        context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+        if self.server.cert is not None:
+            context.load_cert_chain(self.server.cert, self.server.key)
+            return context
+        with tempfile.TemporaryDirectory(prefix="bearcat-page-") as held:
+            cert, key = session_certificate(Path(held), reachable(self.server.host))
+            context.load_cert_chain(cert, key)
+        return context
+
+
+def session_certificate(directory: Path, address: str) -> tuple[Path, Path]:
+    """A self-signed certificate for this session's page, naming ``address``
+    and the loopback (the phone asks once whether to trust it)."""
+    from cryptography import x509
+    from cryptography.hazmat.primitives import hashes, serialization
+    from cryptography.hazmat.primitives.asymmetric import ec
+    from cryptography.x509.oid import NameOID
+
+    key = ec.generate_private_key(ec.SECP256R1())
+    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "bearcat phone")])
+    names: list[x509.GeneralName] = [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
+    try:
+        names.append(x509.IPAddress(ipaddress.ip_address(address)))
+    except ValueError:
+        names.append(x509.DNSName(address))
+    now = datetime.datetime.now(datetime.UTC)
+    cert = (
+        x509.CertificateBuilder()
+        .subject_name(name)
+        .issuer_name(name)
+        .public_key(key.public_key())
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - datetime.timedelta(minutes=5))
+        .not_valid_after(now + datetime.timedelta(days=2))
+        .add_extension(x509.SubjectAlternativeName(list(dict.fromkeys(names))), critical=False)
+        .sign(key, hashes.SHA256())
+    )
+    cert_path, key_path = directory / "page.pem", directory / "page.key"
+    cert_path.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    key_path.write_bytes(
+        key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
+    )
+    return cert_path, key_path
