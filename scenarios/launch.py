@@ -343,9 +343,12 @@ def _play(
 
             how[GROUND] = ("ground-station", ("--judge", "fixes") if phones else ())
             how |= {a.id: ("walker", ()) for a in scenario.agents if a.id not in keyboard and a.id not in phones}
-            how |= _pages(phones, page, out, say)
+            pages = _pages(phones, page, out)
+            how |= {name: server_how for name, (_, server_how) in pages.items()}
             for name in list(how):
                 children[name] = start(name)
+            for name, (server, _) in pages.items():
+                _say_link(name, server, children[name], say)
             for k, uav in enumerate(scenario.uavs):
                 port = free_port(socket.SOCK_DGRAM)
                 how[uav.id] = ("uav", ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"))
@@ -422,13 +425,13 @@ def _play(
     return outcome
 
 
-def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path, say) -> dict[str, tuple]:
-    """How to start a page for each of ``phones`` (on successive ports from
-    ``page``), each with a token of its own, kept where only this user reads
-    it; and the link to each, said with its QR code."""
+def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[str, tuple]:
+    """For each of ``phones``, its page's server (on successive ports from
+    ``page``, each with a token of its own, kept where only this user reads
+    it) and how to start its peer."""
     from bearcat.agents.human.browser_bridge import PageServer, new_token
 
-    how = {}
+    pages = {}
     if phones:
         (out / "phones").mkdir(mode=0o700, exist_ok=True)
     for k, name in enumerate(phones):
@@ -436,10 +439,24 @@ def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path, say) -> di
         token_file = out / "phones" / f"{name}.token"
         token_file.touch(mode=0o600)
         token_file.write_text(server.token + "\n")
-        how[name] = ("phone", ("--page", f"{server.host}:{server.port}", "--token-file", str(token_file)))
-        say(f"agent {name} plays from a phone: open {server.url()} on it (the game waits for its first fix)")
-        say(server.qr())
-    return how
+        pages[name] = (server, ("phone", ("--page", f"{server.host}:{server.port}", "--token-file", str(token_file))))
+    return pages
+
+
+def _say_link(name: str, server, peer: subprocess.Popen, say, wait: float = STARTUP) -> None:
+    """Once ``peer`` serves its page, the link to open on the phone and its QR code."""
+    address = "127.0.0.1" if server.host in ("0.0.0.0", "") else server.host
+    end = time.monotonic() + wait
+    while time.monotonic() < end and peer.poll() is None:
+        try:
+            socket.create_connection((address, server.port), timeout=0.5).close()
+            break
+        except OSError:
+            time.sleep(0.1)
+    else:
+        return  # the peer died or never served: the launcher says so in its own words
+    say(f"agent {name} plays from a phone: open {server.url()} on it (the game waits for its first fix)")
+    say(server.qr())
 
 
 def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:

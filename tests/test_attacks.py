@@ -41,11 +41,7 @@ def attacked(tmp_path_factory):
     path = write_scenario(base, time_limit=12.0, netem="ideal")
     scenario = load_scenario(path)
     out = base / "run"
-    env = {
-        **os.environ,
-        "BEARCAT_CACHE_DIR": str(tmp_path_factory.getbasetemp() / "cache"),
-        "PYTHONUNBUFFERED": "1",
-    }
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
     launcher = subprocess.Popen(
         [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
         env=env,

@@ -43,7 +43,7 @@ def guarded(tmp_path_factory):
     add_members(certs, {"stranger": "walker"})
     foreign = make_authority(base / "foreign", {"attacker": "walker"})
     out = base / "run"
-    env = dict(os.environ, BEARCAT_CACHE_DIR=str(tmp_path_factory.getbasetemp() / "cache"), PYTHONUNBUFFERED="1")
+    env = dict(os.environ, PYTHONUNBUFFERED="1")
     launcher = subprocess.Popen(
         [sys.executable, "-m", "bearcat", "run", str(path), "--secure", "--certs", str(certs), "--out", str(out)],
         env=env,

@@ -1,0 +1,187 @@
+"""A person plays from a phone's browser: Chromium, driven by Playwright,
+opens the page a live ``bearcat run --phone attacker`` serves, walks along
+a path by emulated geolocation with a heading from an emulated orientation
+sensor, and the game against a scripted defender ends with a verdict judged
+on fixes.
+
+Set ``BEARCAT_PHONE_SCREENSHOTS=DIR`` to keep the page's screenshots (the
+README's come from there).
+"""
+
+import itertools
+import json
+import math
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from bearcat.agents.ground_station.event_log import read_events
+from bearcat.scenarios.launch import free_port
+from bearcat.scenarios.schema import load_scenario
+from tests.support.scenario_files import write_scenario
+
+playwright = pytest.importorskip("playwright.sync_api")
+CHROMIUM = shutil.which("chromium") and "/usr/lib/chromium/chromium"
+pytestmark = pytest.mark.skipif(
+    not (CHROMIUM and Path(CHROMIUM).exists()), reason="needs Debian's chromium (apt-get install chromium)"
+)
+
+HEADING = 330.0  # degrees the phone's top edge points to, through the orientation sensor
+START = (25.0, 22.0)  # the attacker's start in the scenario
+STEP = (-0.3, 0.35)  # metres per half second: up and to the left, towards home
+
+
+def _path(k: int) -> tuple[float, float]:
+    return (START[0] + STEP[0] * k, START[1] + STEP[1] * k)
+
+
+@pytest.fixture(scope="module")
+def played(tmp_path_factory):
+    base = tmp_path_factory.mktemp("browser")
+    path = write_scenario(base, time_limit=20.0, netem="ideal")
+    scenario = load_scenario(path)
+    out, shots = base / "run", base / "shots"
+    shots.mkdir()
+    port = free_port()
+    launcher = subprocess.Popen(
+        [sys.executable, "-m", "bearcat", "run", str(path), "--phone", "attacker", "--page", f"127.0.0.1:{port}"]
+        + ["--out", str(out)],
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+    found = {"out": out, "scenario": scenario, "shots": shots}
+
+    def geo(point):
+        lat, lon = scenario.map.to_geodetic(*point)
+        return {"latitude": lat, "longitude": lon, "accuracy": 4.0}
+
+    try:
+        said = []
+        for line in launcher.stdout:
+            said.append(line)
+            if match := re.search(r"open (https://\S+) on it", line):
+                url = match.group(1)
+                break
+        else:
+            pytest.fail(f"the launcher printed no link: {''.join(said)}")
+        with playwright.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+            context = browser.new_context(
+                geolocation=geo(START),
+                permissions=["geolocation", "accelerometer", "gyroscope", "magnetometer"],
+                ignore_https_errors=True,  # the certificate the bridge made for this session
+                viewport={"width": 390, "height": 760},
+                device_scale_factor=2,
+                is_mobile=True,
+                has_touch=True,
+            )
+            found["without token"] = context.request.get(url.split("?")[0]).status
+            found["wrong token"] = context.request.get(url.split("?")[0] + "?token=guess").status
+            page = context.new_page()
+            page.goto(url)
+            sensors = context.new_cdp_session(page)
+            sensors.send("Emulation.setSensorOverrideEnabled", {"enabled": True, "type": "absolute-orientation"})
+            half = math.radians(-HEADING) / 2  # the sensor's yaw counts anticlockwise from north
+            reading = {"quaternion": {"x": 0.0, "y": 0.0, "z": math.sin(half), "w": math.cos(half)}}
+            sensors.send("Emulation.setSensorOverrideReadings", {"type": "absolute-orientation", "reading": reading})
+            page.screenshot(path=shots / "1-start.png")
+            page.click("#go")
+            k = 0
+            for k in range(120):
+                context.set_geolocation(geo(_path(k)))
+                time.sleep(0.5)
+                if k == 12:
+                    page.evaluate("state.socket.send(JSON.stringify({type: 'fix', lat: 123.0, lon: 0.0}))")
+                if k == 16:
+                    page.evaluate("state.socket.close()")  # the link drops, as when the screen sleeps
+                if k == 20:
+                    page.screenshot(path=shots / "2-playing.png")
+                    found["playing"] = page.inner_text("body")
+                if page.inner_text("#phase") == "game over":
+                    break
+            found["steps"] = k
+            time.sleep(1.0)
+            page.screenshot(path=shots / "3-ended.png")
+            found["ended"] = page.inner_text("body")
+            browser.close()
+        output, _ = launcher.communicate(timeout=120)
+        found["output"] = "".join(said) + output
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+            launcher.wait()
+    keep = os.environ.get("BEARCAT_PHONE_SCREENSHOTS")
+    if keep:
+        shutil.copytree(shots, keep, dirs_exist_ok=True)
+    assert launcher.returncode == 0, found["output"]
+    return found
+
+
+def test_a_game_with_a_browser_phone_ends_with_a_verdict_judged_on_fixes(played):
+    outcome = json.loads((played["out"] / "outcome.json").read_text())
+    assert outcome["ended"] and outcome["winner"] in ("attacker", "defender"), outcome
+    assert all(code == 0 for code in outcome["peers"].values()), outcome["peers"]
+    states = [e["message"] for e in read_events(played["out"] / "events.jsonl") if e["event"] == "sent"]
+    states = [m for m in states if m["type"] == "state"]
+    assert states and all(m["judged_on"] == "fixes" for m in states)
+    assert f"{outcome['winner'].upper()} WINS" in played["ended"] and outcome["reason"] in played["ended"]
+
+
+def test_the_pages_fixes_follow_the_walk_with_the_phones_heading(played):
+    game_map = played["scenario"].map
+    fixes = [
+        e["message"]
+        for e in read_events(played["out"] / "events.jsonl")
+        if e["event"] == "sent" and e["key"].endswith("/fix/attacker")
+    ]
+    assert len(fixes) >= 10
+    walk = [_path(k) for k in range(played["steps"] + 1)]
+    for fix in fixes:
+        where = game_map.to_local(fix["lat"], fix["lon"])
+        assert min(math.dist(where, p) for p in walk) < 0.5, where
+        assert fix["accuracy"] == pytest.approx(4.0)
+    headings = [f["heading"] for f in fixes if f["heading"] is not None]
+    assert headings and all(abs((h - HEADING + 180) % 360 - 180) < 2.0 for h in headings)
+    seqs = [f["seq"] for f in fixes]
+    assert seqs == sorted(seqs) and len(set(seqs)) == len(seqs)
+
+
+def test_the_screen_shows_the_opponent_the_guidance_and_a_bad_fix_dropped_and_counted(played):
+    shown = played["playing"]
+    assert "running" in shown and "online" in shown and "defender" in shown
+    assert "1 fixes dropped" in shown
+    refused = [e for e in read_events(played["out"] / "peers" / "attacker.jsonl") if e["event"] == "refused"]
+    assert len(refused) == 1 and "lat" in refused[0]["reason"]
+
+
+def test_the_page_rejoins_after_its_link_dropped(played):
+    """The socket was closed mid-game: the page opened a new one (it is
+    online four steps later) and its fixes went on."""
+    assert "online" in played["playing"]
+    fixes = [
+        e["t"]
+        for e in read_events(played["out"] / "events.jsonl")
+        if e["event"] == "sent" and e["key"].endswith("/fix/attacker")
+    ]
+    gaps = [b - a for a, b in itertools.pairwise(fixes)]
+    assert max(gaps) < 3.0
+
+
+def test_only_the_link_with_the_players_token_opens_the_page(played):
+    assert played["without token"] == 403 and played["wrong token"] == 403
+
+
+def test_three_screenshots_of_the_game(played):
+    shots = sorted(played["shots"].glob("*.png"))
+    assert [s.name for s in shots] == ["1-start.png", "2-playing.png", "3-ended.png"]
+    images = [s.read_bytes() for s in shots]
+    assert all(i.startswith(b"\x89PNG") and len(i) > 5000 for i in images)
+    assert len(set(images)) == 3
