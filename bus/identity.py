@@ -78,8 +78,8 @@ def make_authority(directory: Path | str, members: dict[str, str], *, hosts: tup
     directory = Path(directory)
     if (directory / f"{AUTHORITY}.pem").exists():
         raise BusError(f"{directory} already holds a certificate authority; issue into it with add_members")
-    directory.mkdir(parents=True, exist_ok=True)
-    os.chmod(directory, 0o700)
+    if not directory.exists():
+        directory.mkdir(mode=0o700, parents=True)  # a directory the user had keeps its own permissions
     key = ec.generate_private_key(ec.SECP256R1())
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "bearcat authority")])
     now = datetime.datetime.now(datetime.UTC)

@@ -339,7 +339,9 @@ def _play(
                 log = out / "peers" / f"{name}.log"
                 if again:
                     extra = (*extra, "--resume")
-                return places.start(name, command(role, name, *extra), log, colocated=name == GROUND, again=again)
+                # The ground station and the phones' bridges stay on the laptop: a real phone's network is real.
+                colocated = role in ("ground-station", "phone")
+                return places.start(name, command(role, name, *extra), log, colocated=colocated, again=again)
 
             how[GROUND] = ("ground-station", ("--judge", "fixes") if phones else ())
             how |= {a.id: ("walker", ()) for a in scenario.agents if a.id not in keyboard and a.id not in phones}

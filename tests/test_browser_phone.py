@@ -105,6 +105,11 @@ def played(tmp_path_factory):
                 if k == 20:
                     page.screenshot(path=shots / "2-playing.png")
                     found["playing"] = page.inner_text("body")
+                if k == 22:
+                    sensors.send("Page.setWebLifecycleState", {"state": "frozen"})  # the screen sleeps
+                if k == 28:
+                    sensors.send("Page.setWebLifecycleState", {"state": "active"})
+                    found["woke"] = time.time()
                 if page.inner_text("#phase") == "game over":
                     break
             found["steps"] = k
@@ -162,9 +167,10 @@ def test_the_screen_shows_the_opponent_the_guidance_and_a_bad_fix_dropped_and_co
     assert len(refused) == 1 and "lat" in refused[0]["reason"]
 
 
-def test_the_page_rejoins_after_its_link_dropped(played):
+def test_the_page_rejoins_after_its_link_dropped_and_after_it_slept(played):
     """The socket was closed mid-game: the page opened a new one (it is
-    online four steps later) and its fixes went on."""
+    online four steps later) and its fixes went on; it was frozen for three
+    seconds, as a sleeping screen freezes it, and its fixes went on after."""
     assert "online" in played["playing"]
     fixes = [
         e["t"]
@@ -172,7 +178,10 @@ def test_the_page_rejoins_after_its_link_dropped(played):
         if e["event"] == "sent" and e["key"].endswith("/fix/attacker")
     ]
     gaps = [b - a for a, b in itertools.pairwise(fixes)]
-    assert max(gaps) < 3.0
+    awake = [t for t in fixes if t > played["woke"]]
+    assert len(awake) >= 3
+    assert max(b - a for a, b in itertools.pairwise([t for t in fixes if t < played["woke"] - 3.5])) < 3.0
+    assert len(gaps) >= 10
 
 
 def test_only_the_link_with_the_players_token_opens_the_page(played):

@@ -25,7 +25,7 @@ PEERS = {"gs": "ground-station", "launcher": "launcher", "attacker": "walker", "
 
 @pytest.fixture(scope="module")
 def authority(tmp_path_factory):
-    return make_authority(tmp_path_factory.mktemp("certs"), PEERS)
+    return make_authority(tmp_path_factory.mktemp("certs") / "authority", PEERS)
 
 
 def test_an_authority_issues_one_certificate_per_peer_with_its_role_and_private_keys_only_its_owner_reads(authority):
