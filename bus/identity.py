@@ -82,23 +82,11 @@ def make_authority(directory: Path | str, members: dict[str, str], *, hosts: tup
         directory.mkdir(mode=0o700, parents=True)  # a directory the user had keeps its own permissions
     key = ec.generate_private_key(ec.SECP256R1())
     subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "bearcat authority")])
-    now = datetime.datetime.now(datetime.UTC)
-    cert = (
-        x509.CertificateBuilder()
-        .subject_name(subject)
-        .issuer_name(subject)
-        .public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + VALIDITY)
-        .add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True)
-        .add_extension(
-            x509.KeyUsage(False, False, False, False, False, True, True, False, False), critical=True
-        )  # certificate and CRL signing only
-        .sign(key, hashes.SHA256())
-    )
-    _write_key(directory / f"{AUTHORITY}.key", key)
-    (directory / f"{AUTHORITY}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+    builder = _builder(subject, subject, key.public_key(), VALIDITY)
+    builder = builder.add_extension(x509.BasicConstraints(ca=True, path_length=0), critical=True).add_extension(
+        x509.KeyUsage(False, False, False, False, False, True, True, False, False), critical=True
+    )  # certificate and CRL signing only
+    _write(directory, AUTHORITY, builder.sign(key, hashes.SHA256()), key)
     add_members(directory, members, hosts=hosts)
     return directory
 
@@ -111,9 +99,7 @@ def add_members(directory: Path | str, members: dict[str, str], *, hosts: tuple[
         ca_cert = x509.load_pem_x509_certificate((directory / f"{AUTHORITY}.pem").read_bytes())
     except FileNotFoundError:
         raise BusError(f"{directory} holds no certificate authority with its key (ca.pem, ca.key)") from None
-    names = [*DEFAULT_HOSTS, *hosts]
-    alternatives = [_alternative(h) for h in dict.fromkeys(names)]
-    now = datetime.datetime.now(datetime.UTC)
+    lifetime = min(VALIDITY, ca_cert.not_valid_after_utc - datetime.datetime.now(datetime.UTC))
     for name, role in members.items():
         keys.check_name(name, "peer name")
         if name == AUTHORITY:
@@ -127,26 +113,51 @@ def add_members(directory: Path | str, members: dict[str, str], *, hosts: tuple[
                 x509.NameAttribute(NameOID.ORGANIZATIONAL_UNIT_NAME, role),
             ]
         )
-        cert = (
-            x509.CertificateBuilder()
-            .subject_name(subject)
-            .issuer_name(ca_cert.subject)
-            .public_key(key.public_key())
-            .serial_number(x509.random_serial_number())
-            .not_valid_before(now - datetime.timedelta(minutes=5))
-            .not_valid_after(min(now + VALIDITY, ca_cert.not_valid_after_utc))
-            .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
-            .add_extension(x509.SubjectAlternativeName(alternatives), critical=False)
-            .add_extension(
-                x509.ExtendedKeyUsage(
-                    [x509.oid.ExtendedKeyUsageOID.SERVER_AUTH, x509.oid.ExtendedKeyUsageOID.CLIENT_AUTH]
-                ),
-                critical=False,
-            )
-            .sign(ca_key, hashes.SHA256())
-        )
-        _write_key(directory / f"{name}.key", key)
-        (directory / f"{name}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
+        builder = _leaf(_builder(subject, ca_cert.subject, key.public_key(), lifetime), hosts)
+        _write(directory, name, builder.sign(ca_key, hashes.SHA256()), key)
+
+
+def self_signed(directory: Path, stem: str, common_name: str, hosts: tuple[str, ...], lifetime: datetime.timedelta):
+    """A certificate that vouches for itself, naming ``hosts`` and the loopback
+    (a web page's for one session); the paths of it and its key."""
+    key = ec.generate_private_key(ec.SECP256R1())
+    subject = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, common_name)])
+    _write(
+        directory,
+        stem,
+        _leaf(_builder(subject, subject, key.public_key(), lifetime), hosts).sign(key, hashes.SHA256()),
+        key,
+    )
+    return directory / f"{stem}.pem", directory / f"{stem}.key"
+
+
+def _builder(subject: x509.Name, issuer: x509.Name, public_key, lifetime: datetime.timedelta):
+    now = datetime.datetime.now(datetime.UTC)
+    return (
+        x509.CertificateBuilder()
+        .subject_name(subject)
+        .issuer_name(issuer)
+        .public_key(public_key)
+        .serial_number(x509.random_serial_number())
+        .not_valid_before(now - datetime.timedelta(minutes=5))  # a peer whose clock is a little behind
+        .not_valid_after(now + lifetime)
+    )
+
+
+def _leaf(builder: x509.CertificateBuilder, hosts: tuple[str, ...]) -> x509.CertificateBuilder:
+    """A certificate that serves either end of a TLS link at the loopback and ``hosts``."""
+    names = [_alternative(h) for h in dict.fromkeys((*DEFAULT_HOSTS, *hosts))]
+    usage = [x509.oid.ExtendedKeyUsageOID.SERVER_AUTH, x509.oid.ExtendedKeyUsageOID.CLIENT_AUTH]
+    return (
+        builder.add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
+        .add_extension(x509.SubjectAlternativeName(names), critical=False)
+        .add_extension(x509.ExtendedKeyUsage(usage), critical=False)
+    )
+
+
+def _write(directory: Path, stem: str, cert: x509.Certificate, key: ec.EllipticCurvePrivateKey) -> None:
+    _write_key(directory / f"{stem}.key", key)
+    (directory / f"{stem}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))
 
 
 def members_of(directory: Path | str) -> dict[str, Member]:

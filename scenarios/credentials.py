@@ -46,7 +46,7 @@ def run_authority(
     authority in ``out/certs`` whose certificates name ``hosts`` too (where
     the router listens), spent when the run is over."""
     if given is not None:
-        yield _covering(given, scenario, phones)
+        yield covering(given, scenario, phones)
         return
     directory = make_authority(out / "certs", members(scenario, phones), hosts=hosts)
     (directory / f"{AUTHORITY}.key").unlink()  # nobody issues more for a run of its own
@@ -56,7 +56,7 @@ def run_authority(
         spend(directory)
 
 
-def _covering(given: Path, scenario: Scenario, phones: tuple[str, ...]) -> Path:
+def covering(given: Path, scenario: Scenario, phones: tuple[str, ...]) -> Path:
     """``given``, if it holds a certificate for every peer of ``scenario`` in its role."""
     wanted = members(scenario, phones)
     held = members_of(given)

@@ -51,7 +51,7 @@ from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
-from bearcat.scenarios.credentials import members, run_authority
+from bearcat.scenarios.credentials import covering, members, run_authority
 from bearcat.scenarios.dispatch import FAILED
 from bearcat.scenarios.fault_effects import LAUNCHER
 from bearcat.scenarios.faults import GROUND, FaultError, refusal, write_faults
@@ -145,6 +145,23 @@ def peer_command(
     ]
 
 
+def preflight(
+    scenario: Scenario, plan: tuple, *, transport: str, secure: bool, certs: Path | None, phones: tuple[str, ...]
+) -> None:
+    """One sentence for what would make a run of ``scenario`` fail, said
+    before anything is solved or started."""
+    if (why := refusal(plan, "live")) is not None:
+        raise FaultError(why)
+    if secure and transport != "tcp":
+        raise BusError(
+            f"a --secure run carries everything over tls/, which is TCP: transport {transport!r} cannot be secured"
+        )
+    if certs is not None:
+        covering(certs, scenario, phones)
+    else:
+        members(scenario, phones)  # every phone names an agent
+
+
 def launch(
     scenario: Scenario,
     scenario_ref: str,
@@ -173,13 +190,8 @@ def launch(
     their packets, "shim" leaves the impairment to each peer's shim;
     ``faults`` is the fault plan to apply (default: the scenario's)."""
     plan = scenario.faults if faults is None else tuple(faults)
-    if (why := refusal(plan, "live")) is not None:
-        raise FaultError(why)
     transport = transport or scenario.transport
-    if secure and transport != "tcp":
-        raise BusError(
-            f"a --secure run carries everything over tls/, which is TCP: transport {transport!r} cannot be secured"
-        )
+    preflight(scenario, plan, transport=transport, secure=secure, certs=certs, phones=phones)
     full = next((f for f in plan if f.kind == "disk-full"), None)
     with SmallDisk(out, full.size) if full is not None else nullcontext() as disk:
         outcome = _play(

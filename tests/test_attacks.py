@@ -12,9 +12,6 @@ certificate of an authority of the intruder's own making.
 
 import json
 import math
-import os
-import subprocess
-import sys
 import time
 
 import pytest
@@ -26,6 +23,7 @@ from bearcat.bus.identity import Credentials, make_authority
 from bearcat.bus.messages import Control, Fix, GameState, Truth
 from bearcat.scenarios.schema import load_scenario
 from tests.support.intruder import Intruder
+from tests.support.live_runs import game_started, start_launcher
 from tests.support.scenario_files import write_scenario
 
 GAME = "test-game"
@@ -41,19 +39,12 @@ def attacked(tmp_path_factory):
     path = write_scenario(base, time_limit=12.0, netem="ideal")
     scenario = load_scenario(path)
     out = base / "run"
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    launcher = start_launcher(path, out)
     names = ("gs", "launcher", "defender", "attacker")
     own = make_authority(base / "intruder-certs", dict.fromkeys(names, "ground-station"))
     try:
         end = time.monotonic() + 120
-        while not (out / "endpoint.json").exists() or not _started(out):
+        while not (out / "endpoint.json").exists() or not game_started(out):
             assert time.monotonic() < end and launcher.poll() is None, "the game never started"
             time.sleep(0.1)
         endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
@@ -100,11 +91,6 @@ def attacked(tmp_path_factory):
             launcher.wait()
     assert launcher.returncode == 0, output
     return {"out": out, "scenario": scenario, "heard": heard, "output": output}
-
-
-def _started(out):
-    events = out / "events.jsonl"
-    return events.exists() and any(e.get("message", {}).get("phase") == "running" for e in read_events(events))
 
 
 def _refused(attacked, peer: str, key: str, claimed: str) -> list[dict]:

@@ -14,8 +14,6 @@ import math
 import os
 import re
 import shutil
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -24,6 +22,7 @@ import pytest
 from bearcat.agents.ground_station.event_log import read_events
 from bearcat.scenarios.launch import free_port
 from bearcat.scenarios.schema import load_scenario
+from tests.support.live_runs import start_launcher
 from tests.support.scenario_files import write_scenario
 
 playwright = pytest.importorskip("playwright.sync_api")
@@ -49,14 +48,7 @@ def played(tmp_path_factory):
     out, shots = base / "run", base / "shots"
     shots.mkdir()
     port = free_port()
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "bearcat", "run", str(path), "--phone", "attacker", "--page", f"127.0.0.1:{port}"]
-        + ["--out", str(out)],
-        env=dict(os.environ, PYTHONUNBUFFERED="1"),
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    launcher = start_launcher(path, out, "--phone", "attacker", "--page", f"127.0.0.1:{port}")
     found = {"out": out, "scenario": scenario, "shots": shots}
 
     def geo(point):

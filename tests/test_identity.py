@@ -5,6 +5,8 @@ is newer than the last it took from that sender there."""
 
 import os
 import stat
+import subprocess
+import sys
 import threading
 import time
 
@@ -175,3 +177,40 @@ def test_a_peer_fetches_the_map_only_from_a_provable_ground_station(authority):
         time.sleep(0.3)
         assert asker.fetch(keys.map_query(GAME), timeout=1.0) is None
         assert asker.refusals == {"not allowed": 1}
+
+
+def _bearcat(*args, cwd=None):
+    return subprocess.run(
+        [sys.executable, "-m", "bearcat", *map(str, args)], capture_output=True, text=True, timeout=120, cwd=cwd
+    )
+
+
+def test_bearcat_certs_issues_what_a_scenario_lacks_and_lists_who_holds_what(tmp_path):
+    made = _bearcat("certs", "init", tmp_path / "field", "--scenario", "fake-out", "--phone", "attacker")
+    assert made.returncode == 0, made.stderr
+    assert {line.split()[-1] for line in made.stdout.splitlines()} == {"gs", "launcher", "attacker", "defender"}
+    again = _bearcat("certs", "init", tmp_path / "field", "--scenario", "search")
+    assert again.returncode == 0 and again.stdout.split() == [f"{tmp_path / 'field' / 'q1'}.pem", "uav", "q1"]
+    listed = _bearcat("certs", "list", tmp_path / "field").stdout.splitlines()
+    assert [line.split()[:2] for line in listed] == [
+        ["attacker", "phone"],
+        ["defender", "walker"],
+        ["gs", "ground-station"],
+        ["launcher", "launcher"],
+        ["q1", "uav"],
+    ]
+    wrong = _bearcat("certs", "init", tmp_path / "other", "--scenario", "fake-out", "--phone", "nobody")
+    assert wrong.returncode == 2 and "there is no agent 'nobody' to give a phone" in wrong.stderr
+
+
+def test_a_run_refuses_certificates_that_do_not_fit_it_in_one_sentence(tmp_path):
+    _bearcat("certs", "init", tmp_path / "field", "--scenario", "fake-out", "--phone", "attacker")
+    as_walker = _bearcat("run", "fake-out", "--certs", tmp_path / "field", "--out", tmp_path / "run")
+    assert as_walker.returncode == 2
+    assert "the certificate of 'attacker'" in as_walker.stderr and "is for a phone, not a walker" in as_walker.stderr
+    over_udp = _bearcat("run", "fake-out", "--secure", "--transport", "udp", "--out", tmp_path / "run")
+    assert over_udp.returncode == 2 and "transport 'udp' cannot be secured" in over_udp.stderr
+    bare = _bearcat(
+        "peer", "walker", "--scenario", "fake-out", "--id", "attacker", "--secure", "--connect", "tls/127.0.0.1:1"
+    )
+    assert bare.returncode == 2 and "a --secure peer needs --certs DIR" in bare.stderr

@@ -31,6 +31,7 @@ from bearcat.scenarios.launch import agent_failures, free_port
 from bearcat.scenarios.live import run_peer
 from bearcat.scenarios.schema import load_scenario
 from tests.support.faulty import Faulty
+from tests.support.live_runs import game_started, start_launcher
 from tests.support.scenario_files import write_scenario
 
 
@@ -39,17 +40,10 @@ def env(tmp_path_factory):
     return dict(os.environ, BEARCAT_CACHE_DIR=str(tmp_path_factory.getbasetemp() / "cache"), PYTHONUNBUFFERED="1")
 
 
-def start_run(tmp_path, env, **kw):
+def start_run(tmp_path, **kw):
     path = write_scenario(tmp_path, **kw)
     out = tmp_path / "run"
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
-    return launcher, out, path
+    return start_launcher(path, out), out, path
 
 
 def peers_of(path) -> list[int]:
@@ -66,15 +60,10 @@ def wait_for(predicate, timeout):
     return predicate()
 
 
-def game_started(out):
-    events = out / "events.jsonl"
-    return events.exists() and any(e.get("message", {}).get("phase") == "running" for e in read_events(events))
-
-
-def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path, env):
+def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
     from bearcat.scenarios.checker import check_run
 
-    launcher, out, path = start_run(tmp_path, env, time_limit=6.0)
+    launcher, out, path = start_run(tmp_path, time_limit=6.0)
     output, _ = launcher.communicate(timeout=180)
     assert launcher.returncode == 0, output
     findings = {f.name: f.held for f in check_run(out)}
@@ -96,14 +85,13 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path, env):
     assert (out / "recording.rrd").exists() and "bearcat view" in output
 
 
-def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path, env):
+def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path):
     """A requirement: a SIGKILLed player must be seen gone within two
     seconds, and forfeit once the lease it had to rejoin runs out. The
     socket closes with the process, so Zenoh reports the token gone in
     milliseconds; the margin covers a loaded 2-core machine."""
     launcher, out, path = start_run(
         tmp_path,
-        env,
         time_limit=60.0,
         attacker_behaviour="follow-guidance",
         defender_behaviour="follow-guidance",
@@ -133,8 +121,8 @@ def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(t
     assert peers_of(path) == []
 
 
-def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_path, env):
-    launcher, out, _path = start_run(tmp_path, env, time_limit=8.0, netem="ideal")
+def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_path):
+    launcher, out, _path = start_run(tmp_path, time_limit=8.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         port = json.loads((out / "endpoint.json").read_text())["endpoint"]
@@ -167,11 +155,11 @@ def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_pa
     assert refused > 100
 
 
-def test_a_flood_on_one_key_costs_its_receivers_a_budget_not_their_disk(tmp_path, env):
+def test_a_flood_on_one_key_costs_its_receivers_a_budget_not_their_disk(tmp_path):
     """Twenty thousand messages a second on the defender's fix key: each
     receiver lets through what one sender may cost, drops the rest before
     decoding it, says so once a second, and the game ends as it would."""
-    launcher, out, _path = start_run(tmp_path, env, time_limit=8.0, netem="ideal")
+    launcher, out, _path = start_run(tmp_path, time_limit=8.0, netem="ideal")
     sent = 0
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
@@ -258,8 +246,8 @@ def test_a_client_whose_router_is_not_there_says_so_in_one_sentence(tmp_path, en
     ]
 
 
-def test_ctrl_c_stops_every_peer(tmp_path, env):
-    launcher, out, path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+def test_ctrl_c_stops_every_peer(tmp_path):
+    launcher, out, path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         launcher.send_signal(signal.SIGINT)
@@ -272,10 +260,10 @@ def test_ctrl_c_stops_every_peer(tmp_path, env):
     assert wait_for(lambda: peers_of(path) == [], 10)
 
 
-def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path, env):
+def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path):
     """A launcher that cannot clean up (SIGKILL) still takes its peers with it:
     each is started with the parent-death signal."""
-    launcher, out, path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+    launcher, out, path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         assert len(peers_of(path)) == 3
@@ -320,10 +308,10 @@ def test_a_walker_whose_ground_station_is_gone_for_a_lease_stops_by_itself_sayin
                     p.wait()
 
 
-def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path, env):
+def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path):
     from bearcat.scenarios.live import fetch_scenario
 
-    launcher, out, _path = start_run(tmp_path, env, time_limit=60.0, netem="ideal")
+    launcher, out, _path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
@@ -349,7 +337,6 @@ def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):
 
     launcher, out, _path = start_run(
         tmp_path,
-        env,
         time_limit=14.0,
         netem="ideal",
         attacker=(10.0, 10.0),

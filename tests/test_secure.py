@@ -11,9 +11,6 @@ with none.
 
 import json
 import math
-import os
-import subprocess
-import sys
 import time
 
 import pytest
@@ -27,6 +24,7 @@ from bearcat.bus.messages import Control, Fix
 from bearcat.scenarios.credentials import add_to
 from bearcat.scenarios.schema import load_scenario
 from tests.support.intruder import Intruder
+from tests.support.live_runs import game_started, start_launcher
 from tests.support.scenario_files import write_scenario
 
 GAME = "test-game"
@@ -43,18 +41,11 @@ def guarded(tmp_path_factory):
     add_members(certs, {"stranger": "walker"})
     foreign = make_authority(base / "foreign", {"attacker": "walker"})
     out = base / "run"
-    env = dict(os.environ, PYTHONUNBUFFERED="1")
-    launcher = subprocess.Popen(
-        [sys.executable, "-m", "bearcat", "run", str(path), "--secure", "--certs", str(certs), "--out", str(out)],
-        env=env,
-        stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT,
-        text=True,
-    )
+    launcher = start_launcher(path, out, "--secure", "--certs", str(certs))
     found = {"scenario": scenario, "out": out, "refused_at_connection": {}}
     try:
         end = time.monotonic() + 120
-        while not _started(out):
+        while not game_started(out):
             assert time.monotonic() < end and launcher.poll() is None, "the game never started"
             time.sleep(0.1)
         endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
@@ -108,11 +99,6 @@ def guarded(tmp_path_factory):
     assert launcher.returncode == 0, output
     found["output"] = output
     return found
-
-
-def _started(out):
-    events = out / "events.jsonl"
-    return events.exists() and any(e.get("message", {}).get("phase") == "running" for e in read_events(events))
 
 
 def test_a_certificate_from_another_authority_or_none_is_refused_at_connection(guarded):

@@ -17,7 +17,6 @@ from __future__ import annotations
 import asyncio
 import datetime
 import hmac
-import ipaddress
 import json
 import logging
 import secrets
@@ -31,11 +30,13 @@ from pathlib import Path
 from aiohttp import WSMsgType, web
 
 from bearcat.agents.human.page_phone import PagePhone
+from bearcat.bus.identity import self_signed
 
 log = logging.getLogger(__name__)
 
 REFRESH = 0.25  # s between the screens sent to each open page
 MAX_MESSAGE = 4096  # bytes: a fix is about a hundred
+SESSION = datetime.timedelta(days=2)  # how long the page's own certificate holds
 
 
 @dataclass(frozen=True)
@@ -178,41 +179,7 @@ class Bridge:
             context.load_cert_chain(self.server.cert, self.server.key)
             return context
         with tempfile.TemporaryDirectory(prefix="bearcat-page-") as held:
-            cert, key = session_certificate(Path(held), reachable(self.server.host))
+            # The phone asks once whether to trust it.
+            cert, key = self_signed(Path(held), "page", "bearcat phone", (reachable(self.server.host),), SESSION)
             context.load_cert_chain(cert, key)
         return context
-
-
-def session_certificate(directory: Path, address: str) -> tuple[Path, Path]:
-    """A self-signed certificate for this session's page, naming ``address``
-    and the loopback (the phone asks once whether to trust it)."""
-    from cryptography import x509
-    from cryptography.hazmat.primitives import hashes, serialization
-    from cryptography.hazmat.primitives.asymmetric import ec
-    from cryptography.x509.oid import NameOID
-
-    key = ec.generate_private_key(ec.SECP256R1())
-    name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, "bearcat phone")])
-    names: list[x509.GeneralName] = [x509.DNSName("localhost"), x509.IPAddress(ipaddress.ip_address("127.0.0.1"))]
-    try:
-        names.append(x509.IPAddress(ipaddress.ip_address(address)))
-    except ValueError:
-        names.append(x509.DNSName(address))
-    now = datetime.datetime.now(datetime.UTC)
-    cert = (
-        x509.CertificateBuilder()
-        .subject_name(name)
-        .issuer_name(name)
-        .public_key(key.public_key())
-        .serial_number(x509.random_serial_number())
-        .not_valid_before(now - datetime.timedelta(minutes=5))
-        .not_valid_after(now + datetime.timedelta(days=2))
-        .add_extension(x509.SubjectAlternativeName(list(dict.fromkeys(names))), critical=False)
-        .sign(key, hashes.SHA256())
-    )
-    cert_path, key_path = directory / "page.pem", directory / "page.key"
-    cert_path.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
-    key_path.write_bytes(
-        key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8, serialization.NoEncryption())
-    )
-    return cert_path, key_path

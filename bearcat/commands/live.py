@@ -210,7 +210,7 @@ def register(subparsers) -> None:
 
 
 def run_live(args) -> int:
-    from bearcat.scenarios.launch import launch
+    from bearcat.scenarios.launch import launch, preflight
 
     if args.network == "kernel":
         from bearcat.netem.kernel.commands import KernelError
@@ -222,6 +222,14 @@ def run_live(args) -> int:
     plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
     seed = scenario.seed if args.seed is None else args.seed
     netem = args.netem or scenario.netem
+    preflight(
+        scenario,
+        plan,
+        transport=args.transport or scenario.transport,
+        secure=args.secure,
+        certs=args.certs,
+        phones=tuple(args.phone),
+    )
     out = fresh(args.out or Path("runs") / f"{scenario.name}-{seed}")
     make_directory(out, "run directory")
     solve_ahead(scenario, netem)

@@ -1,0 +1,24 @@
+"""Starting a live run as a user does (``bearcat run`` in a process of its own) and watching it."""
+
+import os
+import subprocess
+import sys
+
+from bearcat.agents.ground_station.event_log import read_events
+
+
+def start_launcher(scenario, out, *flags: str) -> subprocess.Popen:
+    """``bearcat run SCENARIO --out OUT FLAGS...``, its output on a pipe (text)."""
+    return subprocess.Popen(
+        [sys.executable, "-m", "bearcat", "run", str(scenario), "--out", str(out), *flags],
+        env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
+
+
+def game_started(out) -> bool:
+    """Whether the launcher of the run in ``out`` has recorded the game running."""
+    events = out / "events.jsonl"
+    return events.exists() and any(e.get("message", {}).get("phase") == "running" for e in read_events(events))
