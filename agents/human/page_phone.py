@@ -32,13 +32,17 @@ from bearcat.maps import Map
 TICK = 0.1  # s between the sends of what the page reported
 HELD = 20  # fixes held for the next tick at most: a page that floods loses the oldest
 AGE_LIMIT = 60_000.0  # ms: a position the phone measured longer ago than this is not a fix
+SIGMA_PER_95 = 1.0 / math.sqrt(-2.0 * math.log(0.05))
+"""A browser's accuracy is the radius holding the position with 95 %
+probability (W3C Geolocation); a fix's is the error per axis, one sigma of a
+circular Gaussian, whose 95 % radius is 2.448 sigma."""
 
 
 class PageFix(msgspec.Struct, forbid_unknown_fields=True):
     """What the page sends for each position the phone's Geolocation API gave:
     ``age`` is how long ago it was measured (milliseconds, on the phone's own
-    clock, so the two clocks need not agree), ``accuracy`` its reported
-    95 % radius, ``heading`` the compass (None: not known)."""
+    clock, so the two clocks need not agree), ``accuracy`` the radius the
+    browser reports (95 %), ``heading`` the compass (None: not known)."""
 
     lat: Latitude
     lon: Longitude
@@ -79,7 +83,7 @@ class PagePhone:
                 lat=page.lat,
                 lon=page.lon,
                 heading=page.heading,
-                accuracy=page.accuracy,
+                accuracy=None if page.accuracy is None else page.accuracy * SIGMA_PER_95,
             )
             key = keys.fix(self.game, self.name)
             fix = decode(encode(fix), key)  # what any receiver checks, checked before it leaves
@@ -98,7 +102,8 @@ class PagePhone:
         own = None
         if self.last_fix is not None:
             x, y = self.map.to_local(self.last_fix.lat, self.last_fix.lon)
-            own = {"x": x, "y": y, "accuracy": self.last_fix.accuracy, "age": now - self.last_fix.t}
+            accuracy = None if self.last_fix.accuracy is None else self.last_fix.accuracy / SIGMA_PER_95
+            own = {"x": x, "y": y, "accuracy": accuracy, "age": now - self.last_fix.t}
         state = self.state
         return {
             "agent": self.name,
