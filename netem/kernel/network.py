@@ -234,10 +234,19 @@ class KernelNetwork:
         if self._veth is not None:
             # The kernel tears a dead namespace down in the background: its
             # end of the link (and the route through it) would outlive this
-            # call by a moment. Deleting the host's end is immediate.
+            # call by a moment. Deleting the host's end is immediate, unless
+            # that teardown has begun, when the delete is refused and the
+            # link lingers: wait for it to go, so nothing outlives the run.
             veth, self._veth = self._veth, None
             with contextlib.suppress(KernelError):
                 run("ip", "link", "del", veth)
+            end = time.monotonic() + STARTUP
+            while Path(f"/sys/class/net/{veth}").exists() and time.monotonic() < end:
+                time.sleep(0.05)
+                with contextlib.suppress(KernelError):
+                    run("ip", "link", "del", veth)
+            if Path(f"/sys/class/net/{veth}").exists():
+                log.warning("link %s is still there %g s after the run", veth, STARTUP)
 
     # ------------------------------------------------------------------ building
 
