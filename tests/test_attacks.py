@@ -112,7 +112,11 @@ def test_fixes_forged_in_the_defenders_name_never_reach_a_screen(attacked):
     assert shown, "no guidance showed the defender at all"
     assert min(math.dist(p, FORGED_FIX) for p in shown) > 5.0
     refused = _refused(attacked, "gs", keys.fix(GAME, "defender"), "defender")
-    assert {e["reason"].split(":")[0] for e in refused} == {"bad seal", "forged"}
+    # The bare name is no seal; a seal from another authority fails its
+    # signature, or, numbered below the defender's last own fix, is refused
+    # as old before the signature is even checked.
+    reasons = [e["reason"].split(":")[0] for e in refused]
+    assert reasons.count("bad seal") == 10 and set(reasons) - {"bad seal"} <= {"forged", "replayed"}
     assert len(refused) == 20
 
 
