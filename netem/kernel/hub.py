@@ -16,6 +16,12 @@ on its standard input; it answers each line on its standard output:
 
 The end of its standard input (the launcher closed it, or died) ends the
 hub, which writes what it did per link to the file given with ``--report``.
+Nothing else does: a Ctrl-C at the terminal reaches every process of the
+launcher's group, and the hub must go on carrying packets while the
+launcher stops the peers, who say goodbye through it. A hub gone first left
+their connections hanging: the peers had to be killed, and the router's
+half-open sockets held the host's end of the link for a while after the
+run.
 
 Each packet arrives through iptables NFQUEUE; the hub draws its fate
 (``scheduler``), holds it until its time and accepts it, drops it, or for a
@@ -32,6 +38,7 @@ import itertools
 import json
 import os
 import selectors
+import signal
 import socket
 import sys
 import time
@@ -191,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument("--seed", type=int, default=0)
     parser.add_argument("--report", type=Path)
     args = parser.parse_args(argv)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
     def answer(reply: dict) -> None:
         sys.stdout.write(json.dumps(reply) + "\n")
