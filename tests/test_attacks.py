@@ -50,7 +50,10 @@ def attacked(tmp_path_factory):
         endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
         with Intruder(endpoint) as intruder:
             intruder.tap(keys.guidance(GAME, "attacker"))
-            time.sleep(0.5)
+            heard_by = time.monotonic() + 15
+            while not intruder.samples(keys.guidance(GAME, "attacker")):
+                assert time.monotonic() < heard_by, "the intruder heard no guidance to replay"
+                time.sleep(0.1)
 
             def forge(name, key, message):
                 payload = encode(message)
@@ -77,9 +80,7 @@ def attacked(tmp_path_factory):
                 seq=10**6, t=time.time(), phase="ended", elapsed=3.0, winner="attacker", reason=FORGED_REASON
             )
             forge("gs", keys.state(GAME), ended)
-            genuine = intruder.samples(keys.guidance(GAME, "attacker"))
-            assert genuine, "the intruder heard no guidance to replay"
-            key, payload, attachment = genuine[0]
+            key, payload, attachment = intruder.samples(keys.guidance(GAME, "attacker"))[0]
             for _ in range(3):
                 intruder.put(key, payload, attachment)
                 time.sleep(0.1)
