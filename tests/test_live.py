@@ -31,7 +31,7 @@ from bearcat.scenarios.launch import agent_failures, free_port
 from bearcat.scenarios.live import run_peer
 from bearcat.scenarios.schema import load_scenario
 from tests.support.faulty import Faulty
-from tests.support.live_runs import game_started, start_launcher
+from tests.support.live_runs import game_started, start_launcher, wait_for
 from tests.support.scenario_files import write_scenario
 
 
@@ -49,15 +49,6 @@ def start_run(tmp_path, **kw):
 def peers_of(path) -> list[int]:
     found = subprocess.run(["pgrep", "-f", f"bearcat peer .*--scenario {path}"], capture_output=True, text=True)
     return [int(p) for p in found.stdout.split()]
-
-
-def wait_for(predicate, timeout):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.1)
-    return predicate()
 
 
 def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):

@@ -18,18 +18,10 @@ from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.scenarios.credentials import add_to
 from bearcat.scenarios.launch import free_port
 from bearcat.scenarios.schema import load_scenario
+from tests.support.live_runs import wait_for
 from tests.support.scenario_files import write_scenario
 
 GAME = "test-game"
-
-
-def _wait_for(predicate, timeout):
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        if predicate():
-            return True
-        time.sleep(0.1)
-    return predicate()
 
 
 async def _visit(url: str, fix: dict) -> dict:
@@ -77,7 +69,7 @@ def test_bearcat_phone_by_hand_serves_its_page_and_joins_on_the_first_fix(tmp_pa
             first = phone.stdout.readline()
             assert first.startswith("open https://") and "a-secret-of-the-attacker" in first, first
             url = first.split()[1]
-            assert _wait_for(lambda: router.alive(keys.alive(GAME, "ground-station", "gs"), timeout=0.5), 120)
+            assert wait_for(lambda: router.alive(keys.alive(GAME, "ground-station", "gs"), timeout=0.5), 120)
             token = keys.alive(GAME, "phone", "attacker")
             assert not router.alive(token, timeout=0.5)  # not in the game before its page sent a fix
             lat, lon = scenario.map.to_geodetic(25.0, 22.0)
@@ -89,7 +81,7 @@ def test_bearcat_phone_by_hand_serves_its_page_and_joins_on_the_first_fix(tmp_pa
                 except aiohttp.ClientConnectorError:
                     assert time.monotonic() < deadline and phone.poll() is None, "the page was never served"
                     time.sleep(0.2)
-            assert _wait_for(lambda: router.alive(token, timeout=0.5), 10), "the phone never joined"
+            assert wait_for(lambda: router.alive(token, timeout=0.5), 10), "the phone never joined"
             phone.send_signal(signal.SIGINT)
             said, _ = phone.communicate(timeout=30)
         finally:

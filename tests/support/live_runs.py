@@ -3,6 +3,7 @@
 import os
 import subprocess
 import sys
+import time
 
 from bearcat.agents.ground_station.event_log import read_events
 
@@ -22,3 +23,13 @@ def game_started(out) -> bool:
     """Whether the launcher of the run in ``out`` has recorded the game running."""
     events = out / "events.jsonl"
     return events.exists() and any(e.get("message", {}).get("phase") == "running" for e in read_events(events))
+
+
+def wait_for(predicate, timeout) -> bool:
+    """Whether ``predicate()`` came true within ``timeout`` seconds (asked every tenth of one)."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if predicate():
+            return True
+        time.sleep(0.1)
+    return predicate()
