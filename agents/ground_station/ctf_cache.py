@@ -109,7 +109,7 @@ class CtfGame:
         rules = {k: v for k, v in asdict(self.rules).items() if k not in ("return_time", "capture_time")}
         inputs = {
             "format": FORMAT,
-            "version": _version(),
+            "version": package_version(),
             "set": name,
             "map": dumps(self.map, units="metres"),
             "grid_points": self.grid_points,
@@ -225,7 +225,7 @@ def _flaw(value: np.ndarray, time_to_win: np.ndarray | None) -> str | None:
     return None
 
 
-def _version() -> str:
+def package_version() -> str:
     try:
         return metadata.version("bearcat")
     except metadata.PackageNotFoundError:
@@ -281,11 +281,17 @@ def _store(path: Path, solved: SetSolution) -> None:
         (_tstar_path(path), lambda f: np.save(f, np.asarray(solved.time_to_win))),
         (path.with_suffix(".json"), lambda f: f.write(json.dumps(meta).encode())),
     ):
-        handle, temporary = tempfile.mkstemp(dir=path.parent, prefix=".partial-")
-        try:
-            with os.fdopen(handle, "wb") as f:
-                write(f)
-            os.replace(temporary, target)
-        except BaseException:
-            Path(temporary).unlink(missing_ok=True)
-            raise
+        write_atomically(target, write)
+
+
+def write_atomically(target: Path, write) -> None:
+    """``write(file)`` into a temporary file beside ``target``, renamed onto
+    it once complete: a reader sees the old file or the new, never half."""
+    handle, temporary = tempfile.mkstemp(dir=target.parent, prefix=".partial-")
+    try:
+        with os.fdopen(handle, "wb") as f:
+            write(f)
+        os.replace(temporary, target)
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
