@@ -27,7 +27,7 @@ COMMANDS = {
     "maps": ("maps", "list and show maps"),
     "solve": ("solve", "run a solver once on a map"),
     "query": ("ctf", "ask a solved game about a state"),
-    "play": ("ctf", "play a solved game out in closed loop"),
+    "play": ("ctf", "play a solved game or a designed maneuver out in closed loop"),
     "experiment": ("experiment", "run a batch of trials"),
     "simulate": ("simulate", "play a scenario in virtual time, every peer in this process"),
     "run": ("live", "play a scenario live: every peer its own process over Zenoh"),

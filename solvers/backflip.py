@@ -41,7 +41,7 @@ from bearcat.solvers.errors import InputError, fraction, positive
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Box, ControlAffine
 from bearcat.solvers.hji import ReachAvoidResult
-from bearcat.solvers.maneuver import Containment, avoid_set, box, capture_set, contained, forward_reach
+from bearcat.solvers.maneuver import Containment, Mode, avoid_set, box, capture_sequence, capture_set, forward_reach
 from bearcat.solvers.planar_quad import (
     DRIFT,
     IMPULSE,
@@ -163,10 +163,6 @@ class BackflipSets:
         return all(check.holds for check in self.checks)
 
 
-ATTITUDE_SETS = ("RA_T3(T3)", "RA_T2(T2)", "RA_T1(T1)", "Reach_T4(T1)")
-VERTICAL_SETS = ("K2", "K1")
-
-
 def design(backflip: Backflip, *, progress: SetProgress | None = None, scheme: str = "weno5") -> BackflipSets:
     """Solve every set of the backflip and check the sequence."""
     grid = backflip.attitude_grid
@@ -176,38 +172,32 @@ def design(backflip: Backflip, *, progress: SetProgress | None = None, scheme: s
         tick = None if progress is None else (lambda t, change: progress(name, t, horizon, change))
         return solve(horizon=horizon, progress=tick, **solver, **kw)
 
-    rec = solved(
-        "RA_T3(T3)",
-        backflip.recovery_horizon,
-        lambda **kw: capture_set(grid, _attitude(backflip, RECOVERY), backflip.t3.value(grid), record_tstar=True, **kw),
-    )
-    drift = solved(
-        "RA_T2(T2)",
-        backflip.drift_horizon,
-        lambda **kw: capture_set(grid, _attitude(backflip, DRIFT), backflip.t2.value(grid), record_tstar=True, **kw),
-    )
-    impulse = solved(
-        "RA_T1(T1)",
-        backflip.impulse_horizon,
-        lambda **kw: capture_set(grid, _attitude(backflip, IMPULSE), backflip.t1.value(grid), **kw),
-    )
     turn_off = handover_acceleration(backflip)
     spin_down_time = backflip.spin_down_time
     alpha = -turn_off[0] / spin_down_time
     reach_grid, reach_start = _turn_off_start(backflip, turn_off)
-    reach_3d = solved(
+    reach = solved(
         "Reach_T4(T1)",
         spin_down_time,
         lambda **kw: forward_reach(reach_grid, _turn_off(backflip, alpha), reach_start, **kw),
-    )
-    reach = reach_3d.value.min(axis=2)
-    checks = [
-        contained(backflip.start.value(grid), impulse.value, ("hover", "RA_T1(T1)")),
-        contained(reach, drift.value, ("Reach_T4(T1)", "RA_T2(T2)")),
-        contained(backflip.t2.value(grid), rec.value, ("T2", "RA_T3(T3)")),
+    ).value.min(axis=2)
+    modes = [
+        Mode("impulse", _attitude(backflip, IMPULSE), backflip.t1.value(grid), "T1", backflip.impulse_horizon),
+        Mode("drift", _attitude(backflip, DRIFT), backflip.t2.value(grid), "T2", backflip.drift_horizon),
+        Mode("recovery", _attitude(backflip, RECOVERY), backflip.t3.value(grid), "T3", backflip.recovery_horizon),
     ]
+    sequence = capture_sequence(
+        grid,
+        modes,
+        start=("the hover box (where the climb hands over)", backflip.start.value(grid)),
+        handovers={"impulse": ("Reach_T4(T1) (the turn-off's forward reach)", reach)},
+        progress=progress,
+        record_tstar=True,
+        **solver,
+    )
+    rec = sequence.capture["recovery"]
     handed_over = solved(
-        "T_d",
+        "drift time",
         spin_down_time + backflip.drift_horizon,
         lambda **kw: capture_set(
             reach_grid,
@@ -238,10 +228,10 @@ def design(backflip: Backflip, *, progress: SetProgress | None = None, scheme: s
     k1 = solved("K1", drift_time, lambda **kw: avoid_set(vertical, _drift_height(backflip), k2, **kw)).value
     return BackflipSets(
         backflip,
-        {"recovery": rec, "drift": drift, "impulse": impulse},
+        sequence.capture,
         reach,
         {"K1": k1, "K2": k2, "K3": k3},
-        checks,
+        sequence.checks,
         turn_off,
         alpha,
         {

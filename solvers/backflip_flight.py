@@ -35,7 +35,7 @@ from bearcat.solvers.backflip import BackflipSets
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.planar_quad import CLIMB, DRIFT, IMPULSE, RECOVERY, TWO_PI, planar, thrust_acceleration, thrusts
 
-__all__ = ["Flight", "Trials", "fly", "fly_many", "nominal_times"]
+__all__ = ["Flight", "Trials", "fly", "fly_many", "nominal_flight"]
 
 POLICIES = ("sets", "timed")
 DONE = 4
@@ -70,13 +70,13 @@ class Trials:
     flights: list[Flight]
 
 
-def nominal_times(sets: BackflipSets) -> tuple[float, float, float]:
-    """The switch times of the flip flown with the sets and no disturbance:
+def nominal_flight(sets: BackflipSets, start_height: float = 1.0) -> Flight:
+    """The flip flown with the sets and no disturbance; its switch times are
     what the timed baseline switches at."""
-    flight = fly(sets, "sets", np.random.default_rng(0), scale=0.0)
+    flight = fly(sets, "sets", np.random.default_rng(0), scale=0.0, start_height=start_height)
     if not flight.reached:
         raise InputError("the nominal flip does not reach T3 with the sets: there are no times to tune a baseline on")
-    return tuple(float(t) for t in flight.switches[:, 0])
+    return flight
 
 
 def fly(

@@ -31,6 +31,7 @@ out in state units.
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -41,7 +42,17 @@ from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Box, ControlAffine
 from bearcat.solvers.hji import ReachAvoidResult, solve_reach_avoid
 
-__all__ = ["Containment", "avoid_set", "box", "capture_set", "contained", "forward_reach"]
+__all__ = [
+    "Containment",
+    "Mode",
+    "Sequence",
+    "avoid_set",
+    "box",
+    "capture_sequence",
+    "capture_set",
+    "contained",
+    "forward_reach",
+]
 
 
 def box(grid: Grid, lo, hi) -> np.ndarray:
@@ -119,6 +130,70 @@ def contained(inner: np.ndarray, outer: np.ndarray, names: tuple[str, str]) -> C
     values = outer[members]
     worst = float(values.max())
     return Containment(names[0], names[1], worst <= 0.0, float((values > 0).mean()), worst)
+
+
+@dataclass(frozen=True)
+class Mode:
+    """One mode of a maneuver: its closed loop (a fixed law folded into
+    ``f0``, or a control box) with its disturbance, its target (<= 0 inside,
+    on the maneuver's grid, named as the thesis names it, e.g. ``T2``) and
+    the time its capture set allows."""
+
+    name: str
+    dynamics: ControlAffine
+    target: np.ndarray
+    target_name: str
+    horizon: float
+
+
+@dataclass(frozen=True)
+class Sequence:
+    """The capture set of each mode by name, and the sequencing conditions
+    in flight order (the first is the maneuver's start)."""
+
+    capture: dict[str, ReachAvoidResult]
+    checks: list[Containment]
+
+    @property
+    def holds(self) -> bool:
+        return all(check.holds for check in self.checks)
+
+    def failures(self) -> list[Containment]:
+        return [check for check in self.checks if not check.holds]
+
+
+def capture_sequence(
+    grid: Grid,
+    modes: list[Mode],
+    *,
+    start: tuple[str, np.ndarray],
+    handovers: dict[str, tuple[str, np.ndarray]] | None = None,
+    progress: Callable[[str, float, float, float], None] | None = None,
+    **solver,
+) -> Sequence:
+    """Each mode's ``RA_T(T_k)``, solved from the last mode backwards
+    (6.1.3), and the conditions that chain them: the ``start`` set lies in
+    the first mode's capture set, and what each mode hands over lies in the
+    next one's. A mode hands over its target, unless ``handovers`` names
+    another set for it (the forward reach of a transition such as the
+    motors' turn-off, eq. 6.6). ``progress(set name, t, horizon, change)``
+    follows each solve."""
+    handovers = handovers or {}
+    capture: dict[str, ReachAvoidResult] = {}
+    for mode in reversed(modes):
+        name = f"RA_T({mode.target_name})"
+        tick = None if progress is None else (lambda t, change, n=name, h=mode.horizon: progress(n, t, h, change))
+        capture[mode.name] = capture_set(grid, mode.dynamics, mode.target, mode.horizon, progress=tick, **solver)
+    first = modes[0]
+    checks = [contained(start[1], capture[first.name].value, (start[0], _capture_name(first)))]
+    for mode, following in itertools.pairwise(modes):
+        label, handed = handovers.get(mode.name, (f"{mode.target_name} (the {mode.name}'s target)", mode.target))
+        checks.append(contained(handed, capture[following.name].value, (label, _capture_name(following))))
+    return Sequence(capture, checks)
+
+
+def _capture_name(mode: Mode) -> str:
+    return f"RA_T({mode.target_name}) (the {mode.name}'s capture set)"
 
 
 def _required(s, why: str):

@@ -21,6 +21,7 @@ from bearcat.agents.ground_station.ctf_cache import (
     load_or_solve,
     unresolved_capture,
 )
+from bearcat.commands import maneuver as maneuver_command
 from bearcat.maps import load_map
 from bearcat.maps.geodesy import bearing
 from bearcat.output import Output, add_json_option
@@ -175,6 +176,7 @@ def register(subparsers) -> None:
     p.add_argument("--plot", type=Path, metavar="PNG", help="draw the start's winning region and both tracks")
     add_json_option(p, "the tracks and outcome")
     p.set_defaults(run=run_play)
+    maneuver_command.register_play(play_games)
 
 
 def _confidence(text: str) -> float:

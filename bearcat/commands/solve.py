@@ -16,6 +16,7 @@ import numpy as np
 
 from bearcat import arguments
 from bearcat.commands import ctf as ctf_command
+from bearcat.commands import maneuver as maneuver_command
 from bearcat.maps import Map, MapError, Raster, load_map, rasterize
 from bearcat.output import Output, add_json_option
 from bearcat.solvers.openloop import Defender, OpenLoopSolution, solve_openloop
@@ -126,6 +127,7 @@ def register(subparsers) -> None:
     add_json_option(openloop, "the result")
     openloop.set_defaults(run=run_openloop)
     ctf_command.register_solve(games)
+    maneuver_command.register_solve(games)
 
 
 def stage_speeds(args, stages: int) -> list[float]:
