@@ -87,15 +87,26 @@ def fly(
     scale: float = 1.0,
     times: tuple[float, float, float] | None = None,
     start_height: float = 1.0,
+    start: tuple[float, float, float, float] | None = None,
+    hold: float = HOLD,
 ) -> Flight:
-    """One flip under ``policy``, disturbances drawn from ``rng``."""
+    """One flip under ``policy``, disturbances drawn from ``rng`` and held
+    ``hold`` seconds (``math.inf``: one constant push for the whole flip).
+    It starts hovering at ``start_height``, or at ``start`` =
+    ``(phi, phi', y, y')`` in the climb, which hands over at once where the
+    height is already safe."""
     if policy not in POLICIES:
         raise InputError(f"a flip switches by {' or '.join(POLICIES)}, not {policy!r}")
     if policy == "timed" and times is None:
         raise InputError("a timed flip needs its three switch times")
     b = sets.design
     limit = 10.0 + b.recovery_horizon
-    signs = rng.choice(np.array([-1.0, 1.0]), size=(int(limit / HOLD) + 2, 3))
+    if not hold > 0:
+        raise InputError(f"a disturbance must be held for a positive time, not {hold!r}")
+    signs = rng.choice(np.array([-1.0, 1.0]), size=(int(limit / hold) + 2, 3))
+    state = np.array([0.0, 0.0, start_height, 0.0, TWO_PI, 0.0])
+    if start is not None:
+        state[4], state[5], state[2], state[3] = start
     bounds = np.stack([b.disturbance(mode) for mode in (CLIMB, IMPULSE, DRIFT, RECOVERY)]) * scale
     vertical = b.vertical_grid
     path, switches, flags, spent = _fly(
@@ -112,7 +123,8 @@ def fly(
         sets.alpha,
         policy == "timed",
         np.array(times if times is not None else (0.0, 0.0, 0.0)),
-        start_height,
+        state,
+        hold,
         b.recovery_horizon,
         limit,
     )
@@ -181,10 +193,8 @@ def _may_hand_over(mode, phi, rate, y, v, boxes, k1, k2, lo, spacing):
 
 
 @numba.njit(cache=True)
-def _fly(quad, laws, bounds, signs, boxes, k1, k2, k3, lo, spacing, alpha, timed, times, start_height, horizon, limit):
-    state = np.zeros(6)
-    state[2] = start_height
-    state[4] = TWO_PI
+def _fly(quad, laws, bounds, signs, boxes, k1, k2, k3, lo, spacing, alpha, timed, times, start, hold, horizon, limit):
+    state = start.copy()
     steps = int(limit / STEP)
     path = np.full((steps // RECORD + 2, 8), np.nan)
     switches = np.full((3, 5), np.nan)
@@ -234,9 +244,9 @@ def _fly(quad, laws, bounds, signs, boxes, k1, k2, k3, lo, spacing, alpha, timed
                 off_time = -left / alpha if left < 0.0 else 0.0
             mode = nxt
             entered = t
-        hold = int(t / HOLD)
+        held = int(t / hold)
         for c in range(3):
-            d[c] = signs[hold, c] * bounds[mode, c]
+            d[c] = signs[held, c] * bounds[mode, c]
         if mode == DRIFT:
             fade = 1.0 - (t - entered) / off_time if off_time > 0.0 else 0.0
             fade = max(fade, 0.0)

@@ -170,9 +170,7 @@ def _lower_simple_motion(h: SimpleMotion, grid: Grid, dtype) -> Lowered:
         np.concatenate(maps).astype(dtype),
         np.asarray(offsets, np.int64),
         strides,
-        np.zeros(grid.ndim),
-        np.ones(grid.ndim),
-        _NO_DYNAMICS,
+        *_no_tables(grid.ndim, dtype),
         kern.NO_INPUT,
         _EMPTY_F,
         _EMPTY_F,
@@ -218,7 +216,24 @@ def compiled_dynamics(fn) -> CompileResultWAP:
     return CompileResultWAP(dispatcher.get_compile_result(DYNAMICS_SIGNATURE))
 
 
-_NO_DYNAMICS = CompileResultWAP(kern.no_dynamics.get_compile_result(DYNAMICS_SIGNATURE))
+def _no_tables(ndim: int, dtype) -> tuple[np.ndarray, ...]:
+    """The dynamics tables' slots of the kernels under simple motion, never read."""
+    return (
+        np.zeros((1, ndim), dtype),
+        np.zeros((1, ndim, 0), dtype),
+        np.zeros((1, ndim, 0), dtype),
+        np.zeros((1, ndim), dtype),
+    )
+
+
+def table_bytes(hamiltonian, grid: Grid, dtype) -> int:
+    """Bytes of the tables a control-affine Hamiltonian is lowered with: its
+    ``f0``, ``G``, ``K`` and dissipation coefficients at every node."""
+    if not isinstance(hamiltonian, ControlAffine):
+        return 0
+    m = _input_set(hamiltonian.control, "control")[1].size
+    q = _input_set(hamiltonian.disturbance, "disturbance")[1].size
+    return grid.size * grid.ndim * (2 + m + q) * np.dtype(dtype).itemsize
 
 
 def _check_fills(fn, grid: Grid, m: int, q: int) -> None:
@@ -241,10 +256,16 @@ def _lower_control_affine(h: ControlAffine, grid: Grid, dtype) -> Lowered:
     u = _input_set(h.control, "control")
     d = _input_set(h.disturbance, "disturbance")
     _check_fills(dyn, grid, u[1].size, d[1].size)
+    m, q = u[1].size, d[1].size
+    tables = (
+        np.empty((grid.size, grid.ndim), dtype),
+        np.empty((grid.size, grid.ndim, m), dtype),
+        np.empty((grid.size, grid.ndim, q), dtype),
+        np.empty((grid.size, grid.ndim), dtype),
+    )
     lo = np.asarray(grid.lo, dtype=np.float64)
     dx = np.asarray(grid.spacing, dtype=np.float64)
-    shape = np.asarray(grid.shape, np.int64)
-    rate = kern.max_rate(shape, lo, dx, dyn, *u, *d)
+    rate = kern.tabulate(np.asarray(grid.shape, np.int64), lo, dx, dyn, *u, *d, *tables)
     if not math.isfinite(rate):
         raise InputError("dynamics returned a non-finite f0, G or K somewhere on the grid")
     args = (
@@ -255,9 +276,7 @@ def _lower_control_affine(h: ControlAffine, grid: Grid, dtype) -> Lowered:
         np.zeros(1, dtype),
         np.zeros(1, np.int64),
         np.zeros((1, grid.ndim), np.int64),
-        lo,
-        dx,
-        dyn,
+        *tables,
         *u,
         *d,
     )

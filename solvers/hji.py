@@ -65,7 +65,7 @@ import numpy as np
 from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError, fraction, non_negative, positive
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import lower
+from bearcat.solvers.hamiltonians import lower, table_bytes
 
 __all__ = ["SCHEMES", "PaddedField", "ReachAvoidResult", "required_bytes", "solve_reach_avoid"]
 
@@ -215,7 +215,7 @@ def solve_reach_avoid(
         has_avoid=avoid is not None,
         record_tstar=record_tstar,
         record_gradient=record_gradient,
-    )
+    ) + table_bytes(hamiltonian, grid, dtype)
     if need > limit:
         dims = "x".join(str(n) for n in grid.shape)
         raise InputError(

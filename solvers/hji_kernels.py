@@ -37,11 +37,6 @@ BALL = 2
 DYNAMICS_SIGNATURE = types.void(types.float64[::1], types.float64[::1], types.float64[:, ::1], types.float64[:, ::1])
 
 
-@njit(DYNAMICS_SIGNATURE, cache=True)
-def no_dynamics(x, f0, G, K):
-    """Fills the dynamics slot of the kernels under simple motion; never called."""
-
-
 def constants(dtype) -> np.ndarray:
     """The numbers the kernels use, in the value dtype: a float literal in
     the loops would turn float32 arithmetic into float64 and halve the
@@ -209,36 +204,31 @@ def fill_ghosts(arr, shape, edge_sign):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _affine_plane(
-    idx, na, nb, lo, dx, pl, pr, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b, x, f0, G, K, p, cu, cd, umax, dmax, dv
-):
-    """Lax-Friedrichs Hamiltonian of control-affine dynamics over a plane."""
-    ndim = lo.shape[0]
-    ka, kb = ndim - 2, ndim - 1
+def _affine_plane(node0, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv):
+    """Lax-Friedrichs Hamiltonian of control-affine dynamics over the plane
+    whose first node is ``node0``, from the tabulated ``f0``, ``G``, ``K``
+    and dissipation coefficients (``tabulate``)."""
+    ndim = f0s.shape[1]
     W = nb + 6
-    for k in range(ka):
-        x[k] = lo[k] + idx[k] * dx[k]
     for i in range(na):
-        x[ka] = lo[ka] + i * dx[ka]
         for jj in range(nb):
             j = i * W + 3 + jj
-            x[kb] = lo[kb] + jj * dx[kb]
-            dyn(x, f0, G, K)
+            node = node0 + i * nb + jj
             h = 0.0
             diss = 0.0
             for k in range(ndim):
                 p[k] = 0.5 * (pl[k, j] + pr[k, j])
-                h += p[k] * f0[k]
-                diss += _dissipation_coefficient(k, f0, G, K, umax, dmax) * (pr[k, j] - pl[k, j])
+                h += p[k] * f0s[node, k]
+                diss += alphas[node, k] * (pr[k, j] - pl[k, j])
             for i_u in range(cu.shape[0]):
                 s = 0.0
                 for k in range(ndim):
-                    s += G[k, i_u] * p[k]
+                    s += Gs[node, k, i_u] * p[k]
                 cu[i_u] = s
             for i_d in range(cd.shape[0]):
                 s = 0.0
                 for k in range(ndim):
-                    s += K[k, i_d] * p[k]
+                    s += Ks[node, k, i_d] * p[k]
                 cd[i_d] = s
             h += _input_extremum(cu, u_kind, u_a, u_b, -1.0) + _input_extremum(cd, d_kind, d_a, d_b, 1.0)
             dv[j] = h + 0.5 * diss
@@ -340,9 +330,10 @@ def stage(
     speed,
     speed_offset,
     speed_stride,
-    lo,
-    dx,
-    dyn,
+    f0s,
+    Gs,
+    Ks,
+    alphas,
     u_kind,
     u_a,
     u_b,
@@ -376,11 +367,8 @@ def stage(
     dv = np.empty(n, v.dtype)
     spd = np.zeros((nplayers, n), v.dtype)
     norm = np.empty((nplayers, n), v.dtype)
-    x, f0, p = np.empty(ndim), np.empty(ndim), np.empty(ndim)
-    G, K = np.empty((ndim, m)), np.empty((ndim, q))
-    cu, cd, umax, dmax = np.empty(m), np.empty(q), np.empty(m), np.empty(q)
-    _input_bounds(u_kind, u_a, u_b, umax)
-    _input_bounds(d_kind, d_a, d_b, dmax)
+    p = np.empty(ndim)
+    cu, cd = np.empty(m), np.empty(q)
     for pi in range(first, stop):
         start = pi * (na + 6) * W
         base = start + 3 * W
@@ -407,30 +395,7 @@ def stage(
             )
         else:
             _affine_plane(
-                idx,
-                na,
-                nb,
-                lo,
-                dx,
-                pl,
-                pr,
-                dyn,
-                u_kind,
-                u_a,
-                u_b,
-                d_kind,
-                d_a,
-                d_b,
-                x,
-                f0,
-                G,
-                K,
-                p,
-                cu,
-                cd,
-                umax,
-                dmax,
-                dv,
+                pi * na * nb, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv
             )
         centre = v[base : base + n]
         o_run = out[base : base + n]
@@ -488,13 +453,14 @@ def max_abs_difference(a, b):
 
 
 @njit(cache=True)
-def max_rate(shape, lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b):
-    """``max over nodes of sum_k alpha_k / dx_k`` for control-affine dynamics,
-    the rate that bounds the CFL time step."""
+def tabulate(shape, lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b, f0s, Gs, Ks, alphas):
+    """``f0``, ``G`` and ``K`` of time-invariant control-affine dynamics at
+    every node (in C order), and each node's dissipation coefficients: the
+    stage kernel then reads them instead of calling the dynamics, which it
+    could reach only through a function pointer, at every node of every
+    stage. Returns ``max over nodes of sum_k alpha_k / dx_k``, the rate that
+    bounds the CFL time step, or NaN if the dynamics gave a non-finite number."""
     ndim = shape.shape[0]
-    size = 1
-    for k in range(ndim):
-        size *= shape[k]
     m = u_a.shape[0]
     q = d_a.shape[0]
     x = np.empty(ndim)
@@ -506,7 +472,7 @@ def max_rate(shape, lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b):
     _input_bounds(u_kind, u_a, u_b, umax)
     _input_bounds(d_kind, d_a, d_b, dmax)
     best = 0.0
-    for flat in range(size):
+    for flat in range(f0s.shape[0]):
         rest = flat
         for k in range(ndim - 1, -1, -1):
             x[k] = lo[k] + (rest % shape[k]) * dx[k]
@@ -514,6 +480,15 @@ def max_rate(shape, lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b):
         dyn(x, f0, G, K)
         rate = 0.0
         for k in range(ndim):
-            rate += _dissipation_coefficient(k, f0, G, K, umax, dmax) / dx[k]
+            alpha = _dissipation_coefficient(k, f0, G, K, umax, dmax)
+            if not np.isfinite(alpha):
+                return np.nan
+            rate += alpha / dx[k]
+            f0s[flat, k] = f0[k]
+            alphas[flat, k] = alpha
+            for i in range(m):
+                Gs[flat, k, i] = G[k, i]
+            for i in range(q):
+                Ks[flat, k, i] = K[k, i]
         best = max(best, rate)
     return best
