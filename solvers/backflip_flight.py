@@ -259,7 +259,7 @@ def _fly(quad, laws, bounds, signs, boxes, k1, k2, k3, lo, spacing, alpha, timed
             planar(probe, t1, t2, d, quad, k[s])
         for i in range(6):
             state[i] += STEP / 6.0 * (k[0, i] + 2 * k[1, i] + 2 * k[2, i] + k[3, i])
-        t += STEP
+        t = (step + 1) * STEP
     spent[mode] = t - entered
     path[row, 0] = t
     path[row, 1:7] = state

@@ -173,7 +173,10 @@ def run_play(args) -> int:
             **_solve_report(maneuver, sets, "cache"),
             "trials": args.trials,
             "seed": args.seed,
-            "nominal": {"switch_times_s": list(times), "time_in_mode_s": dict(zip(MODES, spent))},
+            "nominal": {
+                "switch_times_s": [round(t, 3) for t in times],
+                "time_in_mode_s": {mode: round(t, 3) for mode, t in zip(MODES, spent)},
+            },
             "rates": rows,
         }
     )
