@@ -18,14 +18,18 @@ Capture sets ``RA_T(T_k)`` come from the target of the last mode backwards
 is projected onto the attitude plane. Avoid sets go backwards from ``K3``.
 The recovery couples height to attitude through the thrust's direction, so
 its avoid set is taken in ``(y, y', tau)``, ``tau`` the time since the
-recovery began, with the vertical thrust bounded by the envelope of
-the vertical thrust over recovery paths from ``T2`` (the nominal trajectory with
-bounds on its deviation of the thesis).
+recovery began, and the rotors' vertical thrust bounded at each ``tau`` by
+its envelope over recovery paths from ``T2`` (the thesis's nominal
+trajectory with bounds on its deviation).
 
 Where the thesis gives a horizon only as "the longest the mode can take",
-it is computed from the attitude sets: the drift's from the time-to-reach of
-its capture set over the turn-off's reach, the recovery's from the
-time-to-reach of its capture set over ``T2``.
+it is computed from the attitude dynamics: the drift's as the longest
+time-to-reach of ``T2`` from the states the impulse hands over, with the
+turn-off and the drift as one 3-D system in ``(phi, phi', a)``; the
+recovery's as the longest time-to-reach of its capture set over ``T2``.
+The height counts the drift, turn-off included, as a free fall: the
+decaying thrust points mostly up while the motors spin down, and what it
+gives is left out.
 """
 
 from __future__ import annotations

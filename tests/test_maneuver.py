@@ -8,7 +8,7 @@ import numpy as np
 
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Box, ControlAffine
-from bearcat.solvers.maneuver import avoid_set, box, capture_set, contained, forward_reach
+from bearcat.solvers.maneuver import Mode, avoid_set, box, capture_sequence, capture_set, contained, forward_reach
 
 
 @numba.njit(cache=True)
@@ -109,3 +109,31 @@ def test_a_sequence_whose_next_capture_set_misses_part_of_a_target_says_which_an
     assert not outside.holds and 0 < outside.outside <= 1 and outside.worst > 0
     assert str(outside).startswith("T_drift is not inside RA(T_recovery)")
     assert math.isfinite(outside.worst)
+
+
+def test_a_sequence_solves_from_the_last_mode_back_and_names_the_modes_whose_hand_over_fails():
+    """Two modes of the same double integrator: ``approach`` hands over in a
+    box around (1, 0), ``settle`` must take it to the origin. With 3 s,
+    settling reaches the origin from all of that box (T* <= 2.2 s there);
+    with 1 s it cannot, and the check says which modes and by how much."""
+    dynamics = ControlAffine(double_integrator, control=Box((-1.0,), (1.0,)))
+    handover = box(GRID, (0.9, -0.1), (1.1, 0.1))
+    origin = box(GRID, (-HALF, -HALF), (HALF, HALF))
+    start = ("the start", box(GRID, (1.4, -0.1), (1.6, 0.1)))
+    seen = []
+
+    def sequence(settle_time):
+        modes = [
+            Mode("approach", dynamics, handover, "T_a", 2.0),
+            Mode("settle", dynamics, origin, "T_s", settle_time),
+        ]
+        return capture_sequence(GRID, modes, start=start, progress=lambda *a: seen.append(a[0]), tol=0)
+
+    held = sequence(3.0)
+    assert held.holds and not held.failures()
+    assert seen[0] == "RA_T(T_s)" and seen[-1] == "RA_T(T_a)"  # the last mode is solved first
+    failed = sequence(1.0)
+    assert [str(c).split(":")[0] for c in failed.failures()] == [
+        "T_a (the approach's target) is not inside RA_T(T_s) (the settle's capture set)"
+    ]
+    assert failed.checks[0].holds and failed.failures()[0].outside == 1.0

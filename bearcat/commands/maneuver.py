@@ -124,7 +124,7 @@ def run_solve(args) -> int:
 
 def run_play(args) -> int:
     out = Output(args.json)
-    maneuver, sets, _source, _seconds = _design(args)
+    maneuver, sets, source, _seconds = _design(args)
     out.say(_heading(maneuver, sets, args.scheme))
     if not sets.holds:
         failing = "; ".join(str(c) for c in sets.checks if not c.holds)
@@ -170,7 +170,7 @@ def run_play(args) -> int:
         out.figure(design_figure(sets, kept), args.plot, dpi=120)
     out.json(
         {
-            **_solve_report(maneuver, sets, "cache"),
+            **_solve_report(maneuver, sets, source),
             "trials": args.trials,
             "seed": args.seed,
             "nominal": {
