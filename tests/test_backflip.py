@@ -115,6 +115,18 @@ def test_the_sets_switch_where_the_thesis_says_and_the_baseline_at_the_nominal_t
     assert np.allclose(timed.switches[:, 0], times, atol=2e-3) and timed.reached
 
 
+def test_a_damaged_cache_entry_is_solved_again_and_replaced(coarse_file, tmp_path, caplog):
+    maneuver = load_maneuver(str(coarse_file))
+    first, source = load_or_design(maneuver, root=tmp_path)
+    assert source == "solved"
+    (entry,) = (tmp_path / "maneuver").glob("*.npz")
+    entry.write_bytes(entry.read_bytes()[:1000])
+    again, source = load_or_design(maneuver, root=tmp_path)
+    assert source == "solved" and "unreadable" in caplog.text
+    assert np.array_equal(again.unsafe["K1"], first.unsafe["K1"])
+    assert load_or_design(maneuver, root=tmp_path)[1] == "cache"
+
+
 def test_far_beyond_the_bounds_flips_fail_and_the_fixed_times_fail_worse(sets):
     """Not a guarantee, a measurement: at 10x the design's disturbances some
     flips miss T3, and the baseline that cannot wait touches the unsafe set
