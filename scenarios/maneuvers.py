@@ -15,6 +15,7 @@ import json
 import logging
 import math
 import tomllib
+import zipfile
 from dataclasses import dataclass, replace
 from importlib import resources
 from pathlib import Path
@@ -296,6 +297,6 @@ def _load(path: Path, backflip: Backflip) -> BackflipSets | None:
             meta["times"],
             envelope,
         )
-    except (OSError, EOFError, ValueError, KeyError, TypeError) as exc:
+    except (OSError, EOFError, ValueError, KeyError, TypeError, zipfile.BadZipFile) as exc:
         log.warning("cached maneuver sets %s are unreadable (%s); solving them again", path, exc)
         return None
