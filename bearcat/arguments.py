@@ -61,6 +61,17 @@ def non_negative(text: str) -> float:
 MAX_SEED = 2**32 - 1
 
 
+def count(text: str) -> int:
+    """A whole number of at least one (trials, games)."""
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"{text!r} is below 1")
+    return value
+
+
 def seed(text: str) -> int:
     """A whole number from 0 to ``MAX_SEED``."""
     try:

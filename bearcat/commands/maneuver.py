@@ -76,7 +76,7 @@ def register_play(games) -> None:
     )
     _maneuver_options(parser)
     parser.add_argument(
-        "--trials", type=_count, default=200, metavar="N", help="flips per policy and scale (default 200)"
+        "--trials", type=arguments.count, default=200, metavar="N", help="flips per policy and scale (default 200)"
     )
     parser.add_argument(
         "--scale",
@@ -246,14 +246,4 @@ def _share(text: str) -> float:
     value = arguments.positive(text)
     if value > 1:
         raise argparse.ArgumentTypeError(f"{text!r} is above 1: no more than the whole noise can turn the vehicle")
-    return value
-
-
-def _count(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r} is not a whole number of flips") from None
-    if value < 1:
-        raise argparse.ArgumentTypeError(f"{text!r}: at least one flip")
     return value
