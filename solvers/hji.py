@@ -302,8 +302,7 @@ class _Stepper:
             *ham_args,
         )
         self.tstar, self.tgrad = tstar, tgrad
-        self.blocks = kern.plane_blocks(grid.shape)
-        planes = len(self.blocks)
+        planes = grid.size // (grid.shape[-1] * grid.shape[-2])
         n = max(1, min(planes, numba.get_num_threads()))
         self.ranges = [(i * planes // n, (i + 1) * planes // n) for i in range(n)]
 
@@ -316,7 +315,6 @@ class _Stepper:
         for i, ((a, b), v, out) in enumerate(zip(_SHU_OSHER[self.stages], sources, outs)):
             final = i == self.stages - 1
             args = (
-                self.blocks,
                 v,
                 u,
                 out,

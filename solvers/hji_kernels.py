@@ -15,11 +15,6 @@ plane's rows taken as one run (ghost columns included and overwritten
 afterwards), so the loops are long and vectorise, and only plane-sized
 scratch exists besides the value buffers. Neighbour planes along the outer
 axes are read in place; only planes beyond the grid edge are made up.
-
-The stage kernel works on blocks (``_block_layout``): whole planes for the
-full-grid solve, or pieces of single rows, so that a solve can update only
-the nodes that need it (the narrow band around the front) with the same
-arithmetic node for node.
 """
 
 from __future__ import annotations
@@ -72,10 +67,11 @@ def _weno5(d0, d1, d2, d3, d4, c):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx, order, k, left, right, n):
-    """Left and right derivatives along one axis for the first ``n`` nodes
-    of a run; ``r3`` is the run itself and ``r0``..``r6`` its neighbours at
-    offsets -3..3 along the axis (first order reads only ``r2``..``r4``)."""
+def _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx, order, k, left, right):
+    """Left and right derivatives along one axis for a whole run; ``r3`` is
+    the run itself and ``r0``..``r6`` its neighbours at offsets -3..3 along
+    the axis (first order reads only ``r2``..``r4``)."""
+    n = left.shape[0]
     if order == 1:
         for j in range(n):
             left[j] = (r3[j] - r2[j]) * inv_dx
@@ -104,7 +100,7 @@ def _beyond(edge, inner, distance, sign):
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def _ghost(edge, inner, distance, sign, out):
-    for j in range(edge.shape[0]):
+    for j in range(out.shape[0]):
         out[j] = _beyond(edge[j], inner[j], distance, sign)
 
 
@@ -208,16 +204,15 @@ def fill_ghosts(arr, shape, edge_sign):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _affine_block(
-    node0, rows, cols, nb, stride, off, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv
-):
-    """Lax-Friedrichs Hamiltonian of control-affine dynamics over a block
-    (``_block_layout``) whose first node is ``node0``, from the tabulated
-    ``f0``, ``G``, ``K`` and dissipation coefficients (``tabulate``)."""
+def _affine_plane(node0, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv):
+    """Lax-Friedrichs Hamiltonian of control-affine dynamics over the plane
+    whose first node is ``node0``, from the tabulated ``f0``, ``G``, ``K``
+    and dissipation coefficients (``tabulate``)."""
     ndim = f0s.shape[1]
-    for i in range(rows):
-        for jj in range(cols):
-            j = i * stride + off + jj
+    W = nb + 6
+    for i in range(na):
+        for jj in range(nb):
+            j = i * W + 3 + jj
             node = node0 + i * nb + jj
             h = 0.0
             diss = 0.0
@@ -240,41 +235,24 @@ def _affine_block(
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _simple_motion_block(
-    idx,
-    row0,
-    rows,
-    col0,
-    cols,
-    stride,
-    off,
-    n,
-    pl,
-    pr,
-    half,
-    axis_player,
-    player_sign,
-    speed,
-    speed_offset,
-    speed_stride,
-    spd,
-    norm,
-    dv,
+def _simple_motion_plane(
+    idx, na, nb, pl, pr, half, axis_player, player_sign, speed, speed_offset, speed_stride, spd, norm, dv
 ):
-    """Lax-Friedrichs Hamiltonian ``sum_q sign_q v_q |p_q|`` over the first
-    ``n`` entries of a block's run (``_block_layout``), with each axis's
-    dissipation coefficient the local speed of its player."""
+    """Lax-Friedrichs Hamiltonian ``sum_q sign_q v_q |p_q|`` over a plane,
+    with each axis's dissipation coefficient the local speed of its player."""
     ndim = axis_player.shape[0]
     ka, kb = ndim - 2, ndim - 1
+    W = nb + 6
+    n = dv.shape[0]
     for q in range(player_sign.shape[0]):
         base = speed_offset[q]
         for k in range(ka):
             base += idx[k] * speed_stride[q, k]
         sa, sb = speed_stride[q, ka], speed_stride[q, kb]
-        for i in range(rows):
-            row = spd[q, i * stride + off : i * stride + off + cols]
-            for jj in range(cols):
-                row[jj] = speed[base + (row0 + i) * sa + (col0 + jj) * sb]
+        for i in range(na):
+            row = spd[q, i * W + 3 : i * W + 3 + nb]
+            for jj in range(nb):
+                row[jj] = speed[base + i * sa + jj * sb]
         for j in range(n):
             norm[q, j] = 0
     for j in range(n):
@@ -330,7 +308,6 @@ def _stencil(v, base, n, k, idx, shape, w, sign, ghosts):
 def stage(
     first,
     stop,
-    blocks,
     v,
     u0,
     out,
@@ -368,12 +345,10 @@ def stage(
     tstar,
     tgrad,
 ):
-    """One Runge-Kutta stage in Shu-Osher form on blocks ``first`` to
-    ``stop - 1`` of ``blocks`` (``_block_layout``) of padded arrays:
-    ``out = a u0 + b (v + dt L(v))`` with ``L`` the Lax-Friedrichs
-    numerical Hamiltonian of backward time, ghosts of ``out`` refreshed on
-    every plane once its last block is done (a thread's blocks end at a
-    plane's end). The last stage of a step (``final``) also keeps
+    """One Runge-Kutta stage in Shu-Osher form on planes ``first`` to
+    ``stop - 1`` of padded arrays: ``out = a u0 + b (v + dt L(v))`` with
+    ``L`` the Lax-Friedrichs numerical Hamiltonian of backward time, ghosts
+    of ``out`` refreshed. The last stage of a step (``final``) also keeps
     ``out <= u0`` if ``monotone``, applies the reach-avoid clamp
     ``max(min(out, target), -avoid)`` and, if
     ``record``, stamps T* and the gradient (unpadded arrays) on nodes
@@ -394,25 +369,18 @@ def stage(
     norm = np.empty((nplayers, n), v.dtype)
     p = np.empty(ndim)
     cu, cd = np.empty(m), np.empty(q)
-    for bi in range(first, stop):
-        pi, row0, rows, col0, cols = blocks[bi, 0], blocks[bi, 1], blocks[bi, 2], blocks[bi, 3], blocks[bi, 4]
+    for pi in range(first, stop):
         start = pi * (na + 6) * W
-        base, n, stride, off = _block_layout(start, row0, rows, col0, cols, nb)
-        node0 = (pi * na + row0) * nb + col0
+        base = start + 3 * W
         _plane_index(pi, shape, idx)
         for k in range(ndim):
             r0, r1, r2, r3, r4, r5, r6 = _stencil(v, base, n, k, idx, shape, w, edge_sign[k], ghosts)
-            _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx[k], order, consts, pl[k], pr[k], n)
+            _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx[k], order, consts, pl[k], pr[k])
         if kind == SIMPLE_MOTION:
-            _simple_motion_block(
+            _simple_motion_plane(
                 idx,
-                row0,
-                rows,
-                col0,
-                cols,
-                stride,
-                off,
-                n,
+                na,
+                nb,
                 pl,
                 pr,
                 consts[14],
@@ -426,29 +394,8 @@ def stage(
                 dv,
             )
         else:
-            _affine_block(
-                node0,
-                rows,
-                cols,
-                nb,
-                stride,
-                off,
-                pl,
-                pr,
-                f0s,
-                Gs,
-                Ks,
-                alphas,
-                u_kind,
-                u_a,
-                u_b,
-                d_kind,
-                d_a,
-                d_b,
-                p,
-                cu,
-                cd,
-                dv,
+            _affine_plane(
+                pi * na * nb, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv
             )
         centre = v[base : base + n]
         o_run = out[base : base + n]
@@ -467,45 +414,20 @@ def stage(
                 for j in range(n):
                     o_run[j] = max(o_run[j], -g_run[j])
             if record:
-                _record(o_run, u_run, pl, pr, rows, cols, nb, stride, off, node0, t_old, dt, tstar, tgrad)
-        if bi == stop - 1 or blocks[bi + 1, 0] != pi:
-            _fill_ghosts(out, start, na, nb, edge_sign[ndim - 2], edge_sign[ndim - 1])
+                _record(o_run, u_run, pl, pr, na, nb, pi * na * nb, t_old, dt, tstar, tgrad)
+        _fill_ghosts(out, start, na, nb, edge_sign[ndim - 2], edge_sign[ndim - 1])
 
 
 @njit(cache=True)
-def _block_layout(start, row0, rows, col0, cols, nb):
-    """Where a block of a plane lies in a padded array: ``(base, n, stride,
-    off)``, its run ``[base, base + n)`` and node ``(i, jj)`` of the block at
-    ``base + i * stride + off + jj``. A block of whole rows is read as one
-    run across them, ghost columns included (the long loops vectorise; the
-    ghost entries are overwritten by ``_fill_ghosts``); a block of part of
-    a row (``rows`` must then be 1) is read as exactly its nodes."""
-    W = nb + 6
-    if col0 == 0 and cols == nb:
-        return start + (3 + row0) * W, rows * W, W, 3
-    return start + (3 + row0) * W + 3 + col0, cols, cols, 0
-
-
-def plane_blocks(shape) -> np.ndarray:
-    """One block per plane, each its whole plane: the full-grid solve."""
-    na, nb = shape[-2], shape[-1]
-    planes = int(np.prod(shape[:-2]))
-    blocks = np.zeros((planes, 5), np.int64)
-    blocks[:, 0] = np.arange(planes)
-    blocks[:, 2] = na
-    blocks[:, 4] = nb
-    return blocks
-
-
-@njit(cache=True)
-def _record(o_run, u_run, pl, pr, rows, cols, nb, stride, off, node0, t_old, dt, tstar, tgrad):
-    """T* and the central gradient of the nodes of one block that entered
+def _record(o_run, u_run, pl, pr, na, nb, offset, t_old, dt, tstar, tgrad):
+    """T* and the central gradient of the nodes of one plane that entered
     the set during this step; the entry time is interpolated linearly."""
     ndim = pl.shape[0]
-    for i in range(rows):
-        for jj in range(cols):
-            j = i * stride + off + jj
-            node = node0 + i * nb + jj
+    W = nb + 6
+    for i in range(na):
+        for jj in range(nb):
+            j = i * W + 3 + jj
+            node = offset + i * nb + jj
             after = o_run[j]
             if after <= 0 and tstar[node] == np.inf:
                 before = u_run[j]

@@ -1,7 +1,6 @@
 """The HJI reach-avoid solver against sets known by inspection, by geometry
 and in closed form; monotonicity, grid edges, convergence, T*, bad input."""
 
-import itertools
 import math
 import tracemalloc
 
@@ -10,7 +9,6 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
@@ -429,42 +427,3 @@ def test_a_five_dimensional_grid_grows_a_ball_at_the_runners_speed_whatever_the_
     game = SimpleMotion((Player((0, 1, 2), 1.0, "control"), Player((3, 4), 0.5, "disturbance")))
     found = solve_reach_avoid(g, game, radius - 1.5, horizon=2.0).reach_avoid_set
     assert_matches(found, radius <= 3.5, 1.0)
-
-
-def _row_pieces(shape):
-    """Blocks of parts of rows: every row of every plane cut in three."""
-    na, nb = shape[-2], shape[-1]
-    cuts = (0, nb // 3, 2 * nb // 3, nb)
-    planes = int(np.prod(shape[:-2]))
-    return np.array(
-        [(p, i, 1, a, b - a) for p in range(planes) for i in range(na) for a, b in itertools.pairwise(cuts)],
-        np.int64,
-    )
-
-
-@pytest.mark.parametrize("scheme", SCHEMES)
-def test_a_stage_over_parts_of_rows_computes_exactly_what_one_over_whole_planes_does(scheme, monkeypatch):
-    """The stage kernel takes blocks of nodes; cut into pieces of rows, a
-    solve (4-D simple motion with T* and its gradient, and a 2-D affine
-    one) gives the same numbers, bit for bit, as one block per plane."""
-    g = Grid.spanning((-5.0,) * 4, (5.0,) * 4, (11,) * 4)
-    xa, ya, xd, yd = np.meshgrid(*g.axes(), indexing="ij", sparse=True)
-    target = np.broadcast_to(np.minimum(STRIP - xa, STRIP - xd), g.shape)
-    avoid = np.hypot(xa - xd, ya - yd) - 1.5
-    flat = plane()
-    x, y = flat.mesh()
-
-    def solves():
-        game = solve_reach_avoid(
-            g, SimpleMotion.pursuit(1.0, 1.0), target, avoid, horizon=3.0, scheme=scheme, record_tstar=True, tol=0
-        )
-        turn = solve_reach_avoid(
-            flat, ControlAffine(rotating, control=Ball((0.0, 0.0), 1.0)), np.hypot(x - 2, y) - 0.5, horizon=1.0
-        )
-        return game.value, game.tstar, game.tstar_gradient, turn.value
-
-    whole = solves()
-    monkeypatch.setattr(kern, "plane_blocks", _row_pieces)
-    pieces = solves()
-    for a, b in zip(whole, pieces):
-        assert np.array_equal(a, b)
