@@ -25,7 +25,7 @@ import msgspec
 import numpy as np
 from msgspec import Meta
 
-from bearcat.agents.ground_station.ctf_cache import cache_root, package_version, write_atomically
+from bearcat.agents.ground_station.ctf_cache import cache_root, solver_fingerprint, write_atomically
 from bearcat.bus.validation import Invalid, convert
 from bearcat.solvers.backflip import Backflip, BackflipSets, SetProgress, TargetBox, design
 from bearcat.solvers.errors import InputError
@@ -230,8 +230,8 @@ def _grid(axes, scales, where: str) -> Grid:
 
 def set_key(maneuver: Maneuver, scheme: str) -> str:
     """The cache key of ``maneuver``'s sets: its design as solved (the file's
-    numbers after any override), the scheme, the format and the version."""
-    inputs = {"format": FORMAT, "version": package_version(), "design": repr(maneuver.design), "scheme": scheme}
+    numbers after any override), the scheme, the format and the code."""
+    inputs = {"format": FORMAT, "code": solver_fingerprint(), "design": repr(maneuver.design), "scheme": scheme}
     return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:32]
 
 

@@ -17,6 +17,7 @@ import pytest
 import shapely
 from scipy import ndimage
 
+from bearcat.agents.ground_station import ctf_cache
 from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve
 from bearcat.maps import MapError, load_map
 from bearcat.maps.ctf import ctf_geometry
@@ -421,6 +422,23 @@ def test_a_different_capture_radius_misses_the_cache(game, tmp_path):
     base = load_or_solve(game, "both", root=tmp_path)
     assert (solved.solution.sets["return"].attacker_wins <= base.solution.sets["return"].attacker_wins).all()
     assert (base.solution.sets["return"].attacker_wins & ~solved.solution.sets["return"].attacker_wins).any()
+
+
+def test_sets_solved_by_other_solver_code_miss_the_cache(game, tmp_path, monkeypatch):
+    """A pull that changes a solver between releases must not load the sets
+    the old code stored: the key holds a hash of the solvers' source."""
+    load_or_solve(game, "both", root=tmp_path)
+    assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "cache", "win": "cache"}
+    source = tmp_path / "src"
+    (source / "solvers").mkdir(parents=True)
+    (source / "solvers" / "hji.py").write_text("DEFAULT_CFL = 0.75\n")
+    before = ctf_cache._fingerprint((source / "solvers",))
+    (source / "solvers" / "hji.py").write_text("DEFAULT_CFL = 0.9\n")
+    ctf_cache._fingerprint.cache_clear()
+    after = ctf_cache._fingerprint((source / "solvers",))
+    assert before != after and before.split(" source ")[0] == after.split(" source ")[0]
+    monkeypatch.setattr(ctf_cache, "solver_fingerprint", lambda: after)
+    assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "solved", "win": "solved"}
 
 
 def test_the_flag_return_stage_is_shared_through_the_cache(game, tmp_path):

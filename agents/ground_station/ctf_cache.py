@@ -6,7 +6,8 @@ time-to-win, memory-mapped on load, with a ``.json`` beside them saying how
 its solve went. Its key hashes everything
 that decides its values: the map's full GeoJSON, the grid, the speeds,
 capture radius and horizon that set depends on, the scheme, tolerance and
-precision, the file format and the package version; W_A's key includes R_A's.
+precision, the file format, and the code that solves it
+(``solver_fingerprint``); W_A's key includes R_A's.
 So two games that share a flag-return stage share its file, and any change
 to the inputs misses the cache rather than loading a stale answer. The
 directory is safe to delete; a damaged entry is logged and solved again.
@@ -22,6 +23,7 @@ from __future__ import annotations
 
 import contextlib
 import fcntl
+import functools
 import hashlib
 import json
 import logging
@@ -32,8 +34,11 @@ from dataclasses import asdict, dataclass
 from importlib import metadata
 from pathlib import Path
 
+import numba
 import numpy as np
 
+import bearcat.maps
+import bearcat.solvers
 from bearcat.maps import Map
 from bearcat.maps.ctf import ctf_geometry
 from bearcat.maps.geojson import dumps
@@ -109,7 +114,7 @@ class CtfGame:
         rules = {k: v for k, v in asdict(self.rules).items() if k not in ("return_time", "capture_time")}
         inputs = {
             "format": FORMAT,
-            "version": package_version(),
+            "code": solver_fingerprint(),
             "set": name,
             "map": dumps(self.map, units="metres"),
             "grid_points": self.grid_points,
@@ -225,11 +230,26 @@ def _flaw(value: np.ndarray, time_to_win: np.ndarray | None) -> str | None:
     return None
 
 
-def package_version() -> str:
+def solver_fingerprint() -> str:
+    """What cached numbers depend on besides their inputs: the package
+    version, numpy's and numba's, and a hash of the source of the solvers
+    and of the map geometry. A checkout that changes a solver between two
+    releases (an editable install after a pull) then misses the cache
+    instead of loading sets the old code solved."""
+    return _fingerprint(tuple(Path(p.__file__).parent for p in (bearcat.solvers, bearcat.maps)))
+
+
+@functools.cache
+def _fingerprint(packages: tuple[Path, ...]) -> str:
     try:
-        return metadata.version("bearcat")
+        version = metadata.version("bearcat")
     except metadata.PackageNotFoundError:
-        return "unknown"
+        version = "unknown"
+    source = hashlib.sha256()
+    for package in packages:
+        for path in sorted(package.rglob("*.py")):
+            source.update(path.relative_to(package.parent).as_posix().encode() + b"\0" + path.read_bytes())
+    return f"{version} numpy {np.__version__} numba {numba.__version__} source {source.hexdigest()[:16]}"
 
 
 def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
