@@ -1,20 +1,35 @@
-"""Solve a scenario's game before its trials or peers start.
+"""Solve a scenario's game before its trials or peers start, or behind a
+live game that started on provisional sets.
 
 The ground station's guidance needs the game's winning sets; solved here,
 with progress bars, they are in the cache before the first trial or peer
 asks, so no game waits on a solve and a cache directory that refuses the
 write is named before anything else runs.
+
+A live run need not wait for a large grid: it may start on provisional
+sets, solved in seconds, while ``SolveBehind`` solves the game's own sets
+into the cache in a child process at the lowest CPU priority, so the
+game's peers keep the processor they need. The ground station takes those
+sets up once they are there.
 """
 
 from __future__ import annotations
+
+import multiprocessing
+import os
+import signal
+import sys
+import time
 
 from bearcat.progress import solve_bars
 from bearcat.writing import writing
 
 
-def solve_ahead(scenario, netem: str) -> None:
+def solve_ahead(scenario, netem: str, *, provisional: bool = False):
     """Build the ground station of ``scenario`` under profile ``netem`` once,
-    which solves (or loads) and caches what its guidance answers from."""
+    which solves (or loads) and caches what its guidance answers from. With
+    ``provisional``, a game whose sets are not cached gets provisional ones
+    instead; the sets it then awaits (``cast.AwaitedSets``), or None."""
     from bearcat.agents.ground_station.ctf_cache import cache_root
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import build_cast
@@ -22,6 +37,92 @@ def solve_ahead(scenario, netem: str) -> None:
     progress = solve_bars()
     try:
         with writing(cache_root(), "cache directory"):
-            build_cast(scenario, load_profile(netem), scenario.seed, people=[], ground=True, ctf_progress=progress)
+            cast = build_cast(
+                scenario,
+                load_profile(netem),
+                scenario.seed,
+                people=[],
+                ground=True,
+                ctf_progress=progress,
+                provisional=provisional,
+            )
     finally:
         progress.close()
+    return cast.awaited
+
+
+class SolveBehind:
+    """The ``awaited`` sets (``cast.AwaitedSets``) solved into the cache by
+    a child process at the lowest CPU priority, from the moment it is made.
+    The child dies with this process. ``finish`` waits for it with a
+    progress bar; ``stop`` ends it, leaving the sets for another run."""
+
+    def __init__(self, awaited) -> None:
+        self.awaited = awaited
+        context = multiprocessing.get_context("spawn")  # the solver's threads do not survive a fork
+        self._where = context.Array("d", 4)  # set's place in the stages, game time reached, horizon, change
+        self._process = context.Process(
+            target=_solve_behind,
+            args=(awaited.game, awaited.stages, self._where),
+            name=f"solve {awaited.game.grid_points}-point sets",
+            daemon=True,
+        )
+        self._process.start()
+
+    @property
+    def done(self) -> bool:
+        return not self._process.is_alive()
+
+    @property
+    def solved(self) -> bool:
+        """Whether the child ended having stored every set."""
+        return self.done and self._process.exitcode == 0
+
+    def finish(self, say) -> bool:
+        """Wait for the sets with a bar of the game time solved, telling
+        ``say`` why; Ctrl-C stops the solve instead. Whether they were solved."""
+        from bearcat.solvers.ctf import STAGES
+
+        if not self.done:
+            grid = self.awaited.game.grid_points
+            say(f"solving the {grid}-point sets so the next run starts on them (Ctrl-C leaves them for later)")
+            names = STAGES[self.awaited.stages]
+            bars = solve_bars()
+            try:
+                while not self.done:
+                    k, t, horizon, change = self._where[:]
+                    if horizon > 0:
+                        bars(names[int(k)], t, horizon, change)
+                    time.sleep(0.2)
+            except KeyboardInterrupt:
+                self.stop()
+                say(f"the {grid}-point sets were left unsolved; the next run starts on provisional sets again")
+            finally:
+                bars.close()
+        return self.solved
+
+    def stop(self) -> None:
+        if not self.done:
+            self._process.terminate()
+        self._process.join()
+
+
+def _solve_behind(game, stages: str, where) -> None:
+    """The child's work: solve ``game``'s ``stages`` into the cache, reporting in ``where``."""
+    from bearcat.agents.ground_station.ctf_cache import load_or_solve
+    from bearcat.netem.kernel.commands import die_with_parent
+    from bearcat.solvers.ctf import STAGES
+
+    die_with_parent()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the launcher's to handle: it stops this solve
+    os.nice(19)
+    names = STAGES[stages]
+
+    def report(name: str, t: float, horizon: float, change: float) -> None:
+        where[:] = [names.index(name), t, horizon, change]
+
+    try:
+        load_or_solve(game, stages, progress=report)
+    except Exception as exc:  # the game goes on without them; say why once
+        print(f"bearcat: the {game.grid_points}-point sets could not be solved: {exc}", file=sys.stderr)
+        sys.exit(1)

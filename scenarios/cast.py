@@ -9,12 +9,20 @@ and the agent's name, so adding an agent does not change another's draws.
 from __future__ import annotations
 
 import zlib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 import shapely
 
-from bearcat.agents.ground_station.ctf_cache import CtfGame, default_rules, load_or_solve, unresolved_capture
+from bearcat.agents.ground_station.ctf_cache import (
+    CtfGame,
+    cached,
+    default_rules,
+    load_or_solve,
+    provisional_grid,
+    unresolved_capture,
+)
 from bearcat.agents.ground_station.guidance import (
     CtfAdvisor,
     GuidanceService,
@@ -46,17 +54,32 @@ def stream(seed: int, agent: str, purpose: str) -> np.random.Generator:
     return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(zlib.crc32(agent.encode()), STREAMS[purpose])))
 
 
+@dataclass(frozen=True)
+class AwaitedSets:
+    """The sets a ground station answering from provisional ones waits for:
+    ``game`` solved for ``stages``, until then answered from its
+    ``provisional``-point sets; ``adopt(queries)`` hands them, once solved,
+    to the guidance and the UAV tasking."""
+
+    game: CtfGame
+    stages: str
+    provisional: int
+    adopt: Callable[[CtfQueries], None]
+
+
 @dataclass
 class Cast:
     """Who plays a scenario: the ground station's ``referee``, ``guidance``
     and UAV ``tasking`` (None where the cast has no ground station or no
-    UAV), the ``people`` and the ``uavs``."""
+    UAV), the ``people`` and the ``uavs``; ``awaited``, the sets the
+    guidance takes up once solved while it answers from coarser ones."""
 
     people: dict[str, HumanAgent]
     referee: Referee | None = None
     guidance: object | None = None
     tasking: list = field(default_factory=list)
     uavs: dict[str, UavAgent] = field(default_factory=dict)
+    awaited: AwaitedSets | None = None
 
     @property
     def ground(self) -> list:
@@ -81,6 +104,7 @@ def build_cast(
     judge: str = "truth",
     autopilots=None,
     uav_truth: bool = True,
+    provisional: bool = False,
 ) -> Cast:
     """The agents of ``scenario``: the people named in ``people`` and the
     UAVs named in ``uavs`` (default: all of both if ``people`` is None, else
@@ -89,12 +113,15 @@ def build_cast(
     with ``uav_truth``: not for a real vehicle); and,
     with ``ground``, the ground station's referee (judging on ``judge``: the
     simulation's truth, or the fixes when the players are real), guidance
-    service and UAV tasking."""
+    service and UAV tasking. With ``provisional``, a capture-the-flag
+    ground station whose sets are not in the cache answers from coarser
+    ones, solved at once, and names the sets it awaits (``Cast.awaited``);
+    the other games solve in well under a second and ignore it."""
     if scenario.game not in GAMES:
         raise ScenarioError(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
         )
-    game = GAMES[scenario.game](scenario)
+    game = GAMES[scenario.game](scenario, provisional=provisional)
     if scenario.uavs and not hasattr(game, "tasker"):
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
@@ -111,7 +138,8 @@ def build_cast(
     if judge not in ("truth", "fixes"):
         raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
     tasking = [game.tasker()] if scenario.uavs else []
-    return Cast(crowd, game.referee(on_truth=judge == "truth"), game.guidance(ctf_progress), tasking, fleet)
+    guidance = game.guidance(ctf_progress)
+    return Cast(crowd, game.referee(on_truth=judge == "truth"), guidance, tasking, fleet, game.awaited)
 
 
 def simulated_autopilot(scenario: Scenario, spec, seed: int) -> SimulatedAutopilot:
@@ -133,7 +161,7 @@ def _uav_spec(scenario: Scenario, uav: str):
 class _CtfGame:
     """Capture-the-flag as the scenario sets it up (thesis 3.1.1, 3.5)."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    def __init__(self, scenario: Scenario, provisional: bool = False) -> None:
         attackers, defenders = scenario.team("attacker"), scenario.team("defender")
         if len(attackers) != 1 or len(defenders) != 1:
             raise ScenarioError(f"{scenario.source}: capture-the-flag is 1 vs 1: one attacker and one defender")
@@ -155,6 +183,14 @@ class _CtfGame:
                 f"{r.grid}-point grid on map {game_map.name} ({coarse[0]:.2f} m), too coarse to resolve capture; "
                 f"raise rules.grid to at least {coarse[1]} or the radius"
             )
+        asked = r.provisional_grid
+        if asked:
+            coarse = unresolved_capture(game_map, asked, self.rules.capture_radius)
+            if asked >= r.grid or coarse is not None:
+                why = "not below rules.grid" if asked >= r.grid else f"too coarse to resolve capture (use {coarse[1]})"
+                raise ScenarioError(f"{scenario.source}: rules.provisional_grid {asked} is {why}")
+        self.provisional = provisional_grid(game_map, r.grid, self.rules.capture_radius, asked) if provisional else None
+        self.awaited: AwaitedSets | None = None
         self.flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
         self.home = shapely.union_all([g.geometry for g in game_map.regions_with_role("return")])
         self.flag_taken = r.stages == "return"
@@ -163,17 +199,33 @@ class _CtfGame:
         self._navigator = None
         self._solved = None
         self._tasker = None
+        self._advisor = None
         teams = {a.id: a.team for a in scenario.agents} | {u.id: u.team for u in scenario.uavs}
         self.sight = Sight(
             game_map, teams, line_of_sight=r.visibility == "line-of-sight", uavs=[u.id for u in scenario.uavs]
         )
 
     def solved(self, progress=None) -> CtfQueries:
+        """The game's sets; provisional ones while its own are not in the cache, if so asked."""
         if self._solved is None:
             s = self.scenario
-            found = load_or_solve(CtfGame(s.map, s.rules.grid, self.rules), s.rules.stages, progress=progress)
+            game = CtfGame(s.map, s.rules.grid, self.rules)
+            found = None if self.provisional is None else cached(game, s.rules.stages)
+            if self.provisional is not None and found is None:
+                coarse = CtfGame(s.map, self.provisional, self.rules)
+                found = load_or_solve(coarse, s.rules.stages, progress=progress)
+                self.awaited = AwaitedSets(game, s.rules.stages, self.provisional, self.adopt)
+            elif found is None:
+                found = load_or_solve(game, s.rules.stages, progress=progress)
             self._solved = CtfQueries(found.solution)
         return self._solved
+
+    def adopt(self, queries: CtfQueries) -> None:
+        """Answer from ``queries`` from now on, in the guidance and the UAV tasking alike."""
+        self._solved = queries
+        for user in (self._advisor, self._tasker):
+            if user is not None:
+                user.adopt(queries)
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
@@ -190,7 +242,7 @@ class _CtfGame:
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
-        advisor = CtfAdvisor(
+        advisor = self._advisor = CtfAdvisor(
             s.map,
             self.solved(progress),
             attacker=self.attacker.id,
@@ -267,7 +319,9 @@ class _PursuitGame:
     5.4: pursuers see the evader's safe-reachable set and their heading; the
     pursuers win by capture, the evader by lasting the time limit."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    awaited = None
+
+    def __init__(self, scenario: Scenario, provisional: bool = False) -> None:
         self.scenario = scenario
         free = scenario.map.free_space
         if not abs(free.area - free.convex_hull.area) <= 1e-9 * free.area:
@@ -310,7 +364,9 @@ class _ReachAvoidGame:
     must reach the targets in turn; the defenders win by capture or when
     time runs out."""
 
-    def __init__(self, scenario: Scenario) -> None:
+    awaited = None
+
+    def __init__(self, scenario: Scenario, provisional: bool = False) -> None:
         self.scenario = scenario
         attackers = scenario.team("attacker")
         if len(attackers) != 1:

@@ -178,6 +178,7 @@ def launch(
     secure: bool = False,
     phones: tuple[str, ...] = (),
     page: tuple[str, int] = ("0.0.0.0", 8443),
+    provisional: bool = False,
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
     ``certs`` a directory of certificates for every peer (``bearcat certs
@@ -188,7 +189,9 @@ def launch(
     ``transport`` is how best-effort messages travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim;
-    ``faults`` is the fault plan to apply (default: the scenario's)."""
+    ``faults`` is the fault plan to apply (default: the scenario's);
+    a ``provisional`` ground station starts on provisional sets where the
+    scenario's are not cached, and takes those up once solved."""
     plan = scenario.faults if faults is None else tuple(faults)
     transport = transport or scenario.transport
     preflight(scenario, plan, transport=transport, secure=secure, certs=certs, phones=phones)
@@ -210,6 +213,7 @@ def launch(
             secure=secure,
             phones=phones,
             page=page,
+            provisional=provisional,
         )
     if full is not None:  # the disk is back: say what the full one could not take
         _rewrite_outcome(out, outcome)
@@ -238,6 +242,7 @@ def _play(
     secure,
     phones,
     page,
+    provisional,
 ) -> LiveOutcome:
     """Start the peers, play, stop them; the outcome, written beside what the run recorded if the disk lets it."""
     lease_ms = round(1000 * scenario.lease)
@@ -355,7 +360,10 @@ def _play(
                 colocated = role in ("ground-station", "phone")
                 return places.start(name, command(role, name, *extra), log, colocated=colocated, again=again)
 
-            how[GROUND] = ("ground-station", ("--judge", "fixes") if phones else ())
+            how[GROUND] = (
+                "ground-station",
+                (*(("--judge", "fixes") if phones else ()), *(("--provisional",) if provisional else ())),
+            )
             how |= {a.id: ("walker", ()) for a in scenario.agents if a.id not in keyboard and a.id not in phones}
             pages = _pages(phones, page, out)
             how |= {name: server_how for name, (_, server_how) in pages.items()}

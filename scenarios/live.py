@@ -11,6 +11,11 @@ on a stop from the launcher, on SIGINT/SIGTERM, or once the ground station
 has been gone for longer than the lease (a player's peer has nobody to play
 for), and closes its session in every case.
 
+A ground station that started on provisional sets (``cast.AwaitedSets``)
+looks in the cache for its own once a second, off the loop, and hands
+them to its agents on the loop once they are there, noting both in its
+log (``sets`` lines).
+
 A run with a fault plan announces each fault as it begins on the game's
 fault key; the peer applies what concerns it (``fault_effects``): its
 shim cuts or degrades links (on the shim only: on a kernel network the
@@ -28,6 +33,7 @@ import threading
 import time
 from contextlib import closing
 
+from bearcat.agents.ground_station.ctf_cache import cached
 from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
@@ -38,11 +44,13 @@ from bearcat.netem.shim import Shim
 from bearcat.scenarios.dispatch import Dispatcher
 from bearcat.scenarios.fault_effects import LAUNCHER, NETWORK_KINDS, apply_network, lie, skewed
 from bearcat.scenarios.faults import Clock, Gps
+from bearcat.solvers.ctf_queries import CtfQueries
 
 log = logging.getLogger(__name__)
 
 LINGER = 1.0  # s a peer stays up after the game ended
 POLL = 0.1
+AWAIT_POLL = 1.0  # s between looks in the cache for the sets a ground station awaits
 SHUTDOWN_WAIT = 2.0  # s a UAV peer waits, on its way out, for a vehicle that does not answer
 
 
@@ -56,12 +64,16 @@ async def run_peer(
     faults: tuple = (),
     network: str = "shim",
     lease: float | None = None,
+    awaited=None,
+    say=None,
 ) -> str:
     """Drive ``agents`` on ``session`` until the game ends; why it stopped,
     and how often each agent failed if any did. The session is closed on the
     way out, while the loop still stands, so no late sample is handed to it.
     ``faults`` is the run's fault plan, ``network`` where it runs; with a
-    ``lease``, the peer stops when the ground station has been gone that long."""
+    ``lease``, the peer stops when the ground station has been gone that long.
+    ``awaited`` (``cast.AwaitedSets``) are the sets to take up once they
+    are in the cache, which ``say`` is told of."""
     loop = asyncio.get_running_loop()
     clock = WallClock()
     record = record or EventLog(None)
@@ -181,7 +193,25 @@ async def run_peer(
             loop.add_signal_handler(sig, lambda: (why.update(reason="interrupted"), finished.set()))
         except (NotImplementedError, RuntimeError):  # not the main thread
             pass
+
+    async def take_up():
+        """Look for the awaited sets until they are there, then answer from them."""
+        grid = awaited.game.grid_points
+        record.note(clock.now(), "sets", grid=awaited.provisional, awaited=grid)
+        try:
+            while (found := await loop.run_in_executor(None, cached, awaited.game, awaited.stages)) is None:
+                await asyncio.sleep(AWAIT_POLL)
+            awaited.adopt(CtfQueries(found.solution))
+        except Exception as exc:  # the game goes on, on the provisional sets
+            log.warning("the %d-point sets were not taken up (%s); guidance stays on provisional sets", grid, exc)
+            return
+        record.note(clock.now(), "sets", grid=grid, awaited=None)
+        if say is not None:
+            say(f"guidance answers from the {grid}-point sets from now on")
+
     tasks = [asyncio.create_task(ticker(a)) for a in agents]
+    if awaited is not None:
+        tasks.append(asyncio.create_task(take_up()))
     if shim is not None and (shim.dead_zones is not None or faults):
         tasks.append(asyncio.create_task(poller()))
     try:
@@ -221,6 +251,7 @@ def start_peer(
     secure: bool = False,
     page=None,
     say=None,
+    provisional: bool = False,
 ) -> str:
     """Build this peer's agents and run them until the game ends (``bearcat peer``).
     With ``certs``, a directory holding this peer's certificate and key, it
@@ -237,7 +268,9 @@ def start_peer(
     "kernel" the links are impaired below it, so its shim keeps only the
     dead zones; GPS and compass error stay in the phone either way.
     A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
-    an ``emulated`` vehicle's telemetry is the truth."""
+    an ``emulated`` vehicle's telemetry is the truth. A ``provisional``
+    ground station whose sets are not cached answers from coarser ones and
+    takes its own up once they are (``bearcat run`` solves them meanwhile)."""
     import shapely
 
     from bearcat.bus.errors import BusError
@@ -251,9 +284,10 @@ def start_peer(
     profile = load_profile(netem)
     lease_ms = round(1000 * scenario.lease)
     autopilot = None
+    awaited = None
     if role == "ground-station":
-        players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge)
-        agents, name = players.ground, players.guidance.name
+        players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge, provisional=provisional)
+        agents, name, awaited = players.ground, players.guidance.name, players.awaited
     elif role == "uav":
         from bearcat.agents.uav.autopilot import MavsdkAutopilot
 
@@ -364,6 +398,8 @@ def start_peer(
             faults=faults,
             network=network,
             lease=scenario.lease,
+            awaited=awaited,
+            say=say,
         )
         if role == "phone":
             return asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))

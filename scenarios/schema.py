@@ -236,6 +236,10 @@ class CtfRules(_Table):
     capture_radius: Radius | None = None
     stages: Literal["return", "both"] = "return"
     grid: Annotated[int, Meta(ge=9, le=201)] = 45
+    # The grid of the sets a live run starts on while the ``grid`` sets are
+    # not yet solved; unset: derived from the capture radius
+    # (``ctf_cache.provisional_grid``), 0: wait for the ``grid`` sets.
+    provisional_grid: Annotated[int, Meta(ge=0, le=201)] | None = None
     capture_time: Horizon | None = None
     return_time: Horizon | None = None
     visibility: Literal["full", "line-of-sight"] = "full"

@@ -427,3 +427,69 @@ def test_a_person_plays_the_fake_out_defender_and_the_game_joins_the_study(tmp_p
     assert row["labels"]["defender"] == "human" and row["winner"] in ("attacker", "defender") and row["seed"] == 0
     assert "a person as the defender, phones at 1 Hz: attacker wins" in rest and (out / "fake-out.png").exists()
     assert (out / "human" / "seed-0" / "events.jsonl").exists()
+
+
+PROVISIONAL = """
+[scenario]
+name = "provisional"
+map = "field-50"
+game = "ctf"
+time_limit = 25.0
+netem = "ideal"
+
+[rules]
+capture_radius = 2.5
+stages = "return"
+grid = 25
+provisional_grid = 21
+
+[[agent]]
+id = "attacker"
+team = "attacker"
+start = [10.0, 8.0]
+speed = 3.0
+behaviour = "waypoints"
+aided = true
+options = { points = [[40.0, 8.0], [10.0, 8.0]], loop = true }
+
+[[agent]]
+id = "defender"
+team = "defender"
+start = [10.0, 38.0]
+speed = 3.0
+behaviour = "waypoints"
+aided = true
+options = { points = [[40.0, 38.0], [10.0, 38.0]], loop = true }
+"""
+
+
+def test_a_run_whose_sets_are_not_cached_starts_on_provisional_ones_and_takes_its_own_up(tmp_path, monkeypatch):
+    """The game starts on the 21-point sets while the 25-point ones solve
+    behind it (held here until the game is on, so the order is certain);
+    the ground station takes those up mid-game, and they stay in the cache."""
+    from bearcat.agents.ground_station.ctf_cache import cached, turn
+
+    monkeypatch.setenv("BEARCAT_CACHE_DIR", str(tmp_path / "cache"))
+    path = tmp_path / "game.toml"
+    path.write_text(PROVISIONAL)
+    awaited = build_cast(load_scenario(path), load_profile("ideal"), 0, people=[], provisional=True).awaited
+    out = tmp_path / "run"
+    with turn(awaited.game, awaited.stages):
+        launcher = start_launcher(path, out)
+        started = wait_for(lambda: game_started(out), 120)
+    try:
+        output, _ = launcher.communicate(timeout=180)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    assert started and launcher.returncode == 0, output
+    assert "guidance starts on the 21-point sets and takes up the 25-point sets" in output
+    record = read_events(out / "peers" / "gs.jsonl")
+    notes = [(e["grid"], e["awaited"], e["t"]) for e in record if e["event"] == "sets"]
+    assert [note[:2] for note in notes] == [(21, 25), (25, None)], notes
+    ended = min(e["t"] for e in record if e["event"] == "sent" and e["message"].get("phase") == "ended")
+    taken_up = notes[1][2]
+    assert taken_up < ended
+    assert any(e["t"] > taken_up and e["message"]["type"] == "guidance" for e in record if e["event"] == "sent")
+    assert cached(awaited.game, awaited.stages) is not None
+    assert peers_of(path) == []

@@ -97,6 +97,30 @@ def unresolved_capture(game_map: Map, grid: int, capture_radius: float) -> tuple
     return cell, math.ceil(side / capture_radius) + 1
 
 
+PROVISIONAL_CELLS_PER_RADIUS = 1.2
+"""Cells per capture radius of a derived provisional grid: at 1.2 the
+fake-out's 25-point sets end its games as the 45-point sets do (README)."""
+PROVISIONAL_SHARE = 0.6
+"""A derived provisional grid above this share of the game's grid saves too little of the solve to be worth it."""
+
+
+def provisional_grid(game_map: Map, grid: int, capture_radius: float, asked: int | None = None) -> int | None:
+    """The points per axis of the sets a live run answers from while the
+    ``grid``-point sets solve, or None to wait for those. ``asked`` is the
+    scenario's choice (0: wait); unset, it is the coarsest grid with
+    ``PROVISIONAL_CELLS_PER_RADIUS`` cells per capture radius, at least 21
+    points, when that is well below ``grid``: the solve costs the fifth
+    power of the points, so 25 points take a twentieth of 45's time."""
+    if asked == 0:
+        return None
+    if asked is not None:
+        return asked
+    xmin, ymin, xmax, ymax = game_map.bounds
+    side = max(xmax - xmin, ymax - ymin)
+    derived = max(21, math.ceil(PROVISIONAL_CELLS_PER_RADIUS * side / capture_radius - 1e-9) + 1)
+    return derived if derived <= PROVISIONAL_SHARE * grid else None
+
+
 @dataclass(frozen=True)
 class CtfGame:
     """One capture-the-flag game as a user names it."""
@@ -151,9 +175,29 @@ def load_or_solve(
     directory = (root or cache_root()) / "ctf"
     if not use_cache:
         return _load_or_solve(game, stages, directory, False, progress)
-    names = "-".join(game.set_key(name) for name in STAGES.get(stages, ()))
-    with _turn(directory / f".{hashlib.sha256(names.encode()).hexdigest()[:16]}.lock"):
+    with turn(game, stages, root=root):
         return _load_or_solve(game, stages, directory, True, progress)
+
+
+def turn(game: CtfGame, stages: str, *, root: Path | None = None):
+    """The turn to solve ``game``'s ``stages`` (a context manager): while
+    one process holds it, another after the same sets waits for it."""
+    names = "-".join(game.set_key(name) for name in STAGES.get(stages, ()))
+    return _turn((root or cache_root()) / "ctf" / f".{hashlib.sha256(names.encode()).hexdigest()[:16]}.lock")
+
+
+def cached(game: CtfGame, stages: str = "both", *, root: Path | None = None) -> Solved | None:
+    """The sets of ``stages`` if every one of them is in the cache, else
+    None; never solves, never waits for a process that is solving them (an
+    entry is whole once its metadata is there), so it can be asked often."""
+    directory = (root or cache_root()) / "ctf"
+    if not all(path.with_suffix(".json").exists() for path in _paths(game, stages, directory).values()):
+        return None
+    geometry = ctf_geometry(game.map, game.grid_points)
+    known, paths = _loaded(game, stages, directory, geometry)
+    if len(known) < len(paths):
+        return None
+    return Solved(_solution(game, stages, geometry, known), dict.fromkeys(known, "cache"), paths)
 
 
 @contextlib.contextmanager
@@ -183,24 +227,9 @@ def _load_or_solve(
     game: CtfGame, stages: str, directory: Path, use_cache: bool, progress: ProgressCallback | None
 ) -> Solved:
     geometry = ctf_geometry(game.map, game.grid_points)
-    known, sources, paths = {}, {}, {}
-    for name in STAGES.get(stages, ()):
-        paths[name] = directory / f"{game.set_key(name)}.npy"
-        if use_cache:
-            loaded = _load(paths[name], geometry.joint_grid().shape)
-            if loaded is not None:
-                known[name] = loaded
-                sources[name] = "cache"
-    solution = solve_ctf(
-        geometry,
-        game.rules,
-        stages,
-        scheme=game.scheme,
-        dtype=np.dtype(game.dtype),
-        tol=game.tol,
-        known=known,
-        progress=progress,
-    )
+    known, paths = _loaded(game, stages, directory, geometry) if use_cache else ({}, _paths(game, stages, directory))
+    sources = dict.fromkeys(known, "cache")
+    solution = _solution(game, stages, geometry, known, progress)
     for name, solved in solution.sets.items():
         if name not in known:
             flaw = _flaw(solved.value, solved.time_to_win)
@@ -216,6 +245,32 @@ def _load_or_solve(
             if use_cache:
                 _store(paths[name], solved)
     return Solved(solution, sources, paths)
+
+
+def _paths(game: CtfGame, stages: str, directory: Path) -> dict[str, Path]:
+    return {name: directory / f"{game.set_key(name)}.npy" for name in STAGES.get(stages, ())}
+
+
+def _loaded(game: CtfGame, stages: str, directory: Path, geometry) -> tuple[dict[str, SetSolution], dict[str, Path]]:
+    """The sets of ``stages`` the cache holds, and where each one is or goes."""
+    paths = _paths(game, stages, directory)
+    shape = geometry.joint_grid().shape
+    known = {name: found for name, path in paths.items() if (found := _load(path, shape)) is not None}
+    return known, paths
+
+
+def _solution(game: CtfGame, stages: str, geometry, known: dict, progress: ProgressCallback | None = None):
+    """``game`` solved for ``stages``, taking the ``known`` sets as they are."""
+    return solve_ctf(
+        geometry,
+        game.rules,
+        stages,
+        scheme=game.scheme,
+        dtype=np.dtype(game.dtype),
+        tol=game.tol,
+        known=known,
+        progress=progress,
+    )
 
 
 def _flaw(value: np.ndarray, time_to_win: np.ndarray | None) -> str | None:

@@ -244,6 +244,10 @@ class UavTasker:
         k = np.unravel_index(int(np.argmax(masked)), masked.shape)
         return tuple(float(v) for v in self.grid.point(k))
 
+    def adopt(self, ctf: CtfQueries) -> None:
+        """Search from ``ctf`` from now on: the game's own sets, taken up after provisional ones."""
+        self.ctf = ctf
+
     def _defender_wins(self, attacker) -> np.ndarray:
         """W_D(x_a) on the search grid."""
         values = self._defender_values(attacker)

@@ -11,7 +11,7 @@ from bearcat.scenarios.faults import GROUND, load_faults
 from bearcat.scenarios.peers import NETWORKS
 from bearcat.scenarios.run_directory import fresh
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
-from bearcat.solve_ahead import solve_ahead
+from bearcat.solve_ahead import SolveBehind, solve_ahead
 from bearcat.writing import make_directory, writing
 
 
@@ -74,6 +74,12 @@ def register(subparsers) -> None:
         default=("0.0.0.0", 8443),
         metavar="HOST:PORT",
         help="where the phones' pages are served (default 0.0.0.0:8443; the next phone on the next port)",
+    )
+    run.add_argument(
+        "--wait-for-sets",
+        action="store_true",
+        help="solve the scenario's sets before the game starts; by default a capture-the-flag game whose sets "
+        "are not cached starts at once on provisional ones (rules.provisional_grid) while they solve behind it",
     )
     run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
@@ -190,6 +196,12 @@ def register(subparsers) -> None:
         action="store_true",
         help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see",
     )
+    peer.add_argument(
+        "--provisional",
+        action="store_true",
+        help="ground-station: while the scenario's sets are not in the cache, answer from provisional ones "
+        "(rules.provisional_grid) and take the scenario's up once another process has solved them",
+    )
     _page_arguments(peer, listen="--page")
     peer.set_defaults(run=run_peer)
 
@@ -232,26 +244,44 @@ def run_live(args) -> int:
     )
     out = fresh(args.out or Path("runs") / f"{scenario.name}-{seed}")
     make_directory(out, "run directory")
-    solve_ahead(scenario, netem)
-    with writing(out, "run directory"):
-        outcome = launch(
-            scenario,
-            _reference(args.scenario),
-            out,
-            seed=seed,
-            netem=netem,
-            transport=args.transport,
-            network=args.network,
-            say=lambda text: print(text, flush=True),
-            faults=plan,
-            certs=args.certs,
-            secure=args.secure,
-            phones=tuple(args.phone),
-            page=args.page,
+
+    def say(text: str) -> None:
+        print(text, flush=True)
+
+    awaited = solve_ahead(scenario, netem, provisional=not args.wait_for_sets)
+    behind = None
+    if awaited is not None:
+        behind = SolveBehind(awaited)
+        say(
+            f"{scenario.name}: guidance starts on the {awaited.provisional}-point sets and takes up the "
+            f"{awaited.game.grid_points}-point sets once they are solved behind the game"
         )
-    who = f"{outcome.winner} wins" if outcome.winner else "no winner"
-    print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
-    print(f"run directory: {out} (events.jsonl, outcome.json, recording.rrd, peers/); replay: bearcat view {out}")
+    try:
+        with writing(out, "run directory"):
+            outcome = launch(
+                scenario,
+                _reference(args.scenario),
+                out,
+                seed=seed,
+                netem=netem,
+                transport=args.transport,
+                network=args.network,
+                say=say,
+                faults=plan,
+                certs=args.certs,
+                secure=args.secure,
+                phones=tuple(args.phone),
+                page=args.page,
+                provisional=awaited is not None,
+            )
+        who = f"{outcome.winner} wins" if outcome.winner else "no winner"
+        say(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
+        say(f"run directory: {out} (events.jsonl, outcome.json, recording.rrd, peers/); replay: bearcat view {out}")
+        if behind is not None and outcome.reason != "interrupted":
+            behind.finish(say)
+    finally:
+        if behind is not None:
+            behind.stop()
     if args.viewer:
         _open_viewer(out / "recording.rrd")
     return 0 if outcome.ended else 1
@@ -301,7 +331,7 @@ def run_peer(args) -> int:
     else:
         scenario = load_scenario(args.scenario)
     if args.role == "ground-station":
-        solve_ahead(scenario, args.netem or scenario.netem)
+        solve_ahead(scenario, args.netem or scenario.netem, provisional=args.provisional)
     plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
     with nullcontext() if args.out is None else writing(args.out, "run directory"):
         reason = start_peer(
@@ -326,6 +356,7 @@ def run_peer(args) -> int:
             secure=args.secure,
             page=_page_server(args) if args.role == "phone" else None,
             say=lambda text: print(text, flush=True),
+            provisional=args.provisional,
         )
     print(f"peer {name}: {reason}", flush=True)
     return 0

@@ -41,16 +41,22 @@ class CtfAdvisor:
         uncertainty: Uncertainty | None = None,
     ):
         self.map = game_map
-        self.solved = solved
         self.attacker, self.defender = attacker, defender
         self.phase = phase
         self.robust_for = frozenset(robust)
-        self.robust = RobustCtf(solved) if self.robust_for else None
         rules = solved.solution.rules
         self.uncertainty = uncertainty or Uncertainty({attacker: rules.attacker_speed, defender: rules.defender_speed})
+        self.adopt(solved)
+
+    def adopt(self, solved: CtfQueries) -> None:
+        """Answer from ``solved`` from now on: the same game on another grid
+        (a ground station that started on provisional sets takes up its own).
+        What was kept of the old sets' answers goes with them."""
+        self.solved = solved
+        self.robust = RobustCtf(solved) if self.robust_for else None
         spacing = min(solved.geometry.grid.spacing)
         # Fixes outside the free space go to its nearest point a whisker inside.
-        self._inside = game_map.free_space.buffer(-0.05 * spacing)
+        self._inside = self.map.free_space.buffer(-0.05 * spacing)
         self._simplify = 0.25 * spacing
         self._region_step = 0.5 * spacing
         self._regions: dict[str, tuple[tuple, list]] = {}

@@ -43,7 +43,7 @@ class SearchAdvisor:
         return fields
 
     def _against_the_worst(self, agent: str, a: np.ndarray, radius: float | None) -> dict:
-        key = (agent, a[0], a[1], radius, self.tasker.picture.updates, self.ctf.phase)
+        key = (agent, a[0], a[1], radius, self.tasker.picture.updates, self.ctf.phase, self.ctf.solved)
         if self._worst[0] != key:
             answer = None
             try:
