@@ -6,17 +6,18 @@ with progress bars, they are in the cache before the first trial or peer
 asks, so no game waits on a solve and a cache directory that refuses the
 write is named before anything else runs.
 
-A live run need not wait for a large grid: it may start on provisional
-sets, solved in seconds, while ``SolveBehind`` solves the game's own sets
-into the cache in a child process at the lowest CPU priority, so the
-game's peers keep the processor they need. The ground station takes those
-sets up once they are there.
+A live run need not wait for a large grid: its ground station may start
+on provisional sets, solved in seconds, while ``SolveBehind`` solves the
+game's own sets into the cache in a child process at the lowest CPU
+priority, so the game's peers keep the processor they need. The ground
+station takes those sets up once they are there.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import os
+import pickle
 import signal
 import sys
 import time
@@ -25,11 +26,10 @@ from bearcat.progress import solve_bars
 from bearcat.writing import writing
 
 
-def solve_ahead(scenario, netem: str, *, provisional: bool = False):
+def solve_ahead(scenario, netem: str, *, provisional: bool = False) -> None:
     """Build the ground station of ``scenario`` under profile ``netem`` once,
     which solves (or loads) and caches what its guidance answers from. With
-    ``provisional``, a game whose sets are not cached gets provisional ones
-    instead; the sets it then awaits (``cast.AwaitedSets``), or None."""
+    ``provisional``, a game whose sets are not cached gets provisional ones."""
     from bearcat.agents.ground_station.ctf_cache import cache_root
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import build_cast
@@ -37,7 +37,7 @@ def solve_ahead(scenario, netem: str, *, provisional: bool = False):
     progress = solve_bars()
     try:
         with writing(cache_root(), "cache directory"):
-            cast = build_cast(
+            build_cast(
                 scenario,
                 load_profile(netem),
                 scenario.seed,
@@ -48,7 +48,6 @@ def solve_ahead(scenario, netem: str, *, provisional: bool = False):
             )
     finally:
         progress.close()
-    return cast.awaited
 
 
 class SolveBehind:
@@ -63,7 +62,10 @@ class SolveBehind:
         self._where = context.Array("d", 4)  # set's place in the stages, game time reached, horizon, change
         self._process = context.Process(
             target=_solve_behind,
-            args=(awaited.game, awaited.stages, self._where),
+            # Pickled here, unpickled after the child lowered its priority: loading
+            # the game imports the solvers, a second of work the peers starting
+            # beside it should not wait for.
+            args=(pickle.dumps(awaited.game), awaited.stages, self._where),
             name=f"solve {awaited.game.grid_points}-point sets",
             daemon=True,
         )
@@ -107,15 +109,17 @@ class SolveBehind:
         self._process.join()
 
 
-def _solve_behind(game, stages: str, where) -> None:
-    """The child's work: solve ``game``'s ``stages`` into the cache, reporting in ``where``."""
-    from bearcat.agents.ground_station.ctf_cache import load_or_solve
+def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
+    """The child's work: solve the game's ``stages`` into the cache, reporting in ``where``."""
+    os.nice(19)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the launcher's to handle: it stops this solve
     from bearcat.netem.kernel.commands import die_with_parent
-    from bearcat.solvers.ctf import STAGES
 
     die_with_parent()
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the launcher's to handle: it stops this solve
-    os.nice(19)
+    from bearcat.agents.ground_station.ctf_cache import load_or_solve
+    from bearcat.solvers.ctf import STAGES
+
+    game = pickle.loads(pickled_game)
     names = STAGES[stages]
 
     def report(name: str, t: float, horizon: float, change: float) -> None:

@@ -17,10 +17,10 @@ import shapely
 
 from bearcat.agents.ground_station.ctf_cache import (
     CtfGame,
-    cached,
     default_rules,
     load_or_solve,
     provisional_grid,
+    stored,
     unresolved_capture,
 )
 from bearcat.agents.ground_station.guidance import (
@@ -58,13 +58,19 @@ def stream(seed: int, agent: str, purpose: str) -> np.random.Generator:
 class AwaitedSets:
     """The sets a ground station answering from provisional ones waits for:
     ``game`` solved for ``stages``, until then answered from its
-    ``provisional``-point sets; ``adopt(queries)`` hands them, once solved,
-    to the guidance and the UAV tasking."""
+    ``provisional``-point sets."""
 
     game: CtfGame
     stages: str
     provisional: int
-    adopt: Callable[[CtfQueries], None]
+
+
+def awaited_sets(scenario: Scenario) -> AwaitedSets | None:
+    """The sets a ground station of ``scenario`` started on provisional sets
+    now would wait for; None where it would start on its own (they are
+    cached, or its grid is coarse enough already) or its game solves none.
+    Solves nothing, but refuses a scenario its ground station would."""
+    return _CtfGame(scenario, provisional=True).awaiting() if scenario.game == "ctf" else None
 
 
 @dataclass
@@ -72,7 +78,8 @@ class Cast:
     """Who plays a scenario: the ground station's ``referee``, ``guidance``
     and UAV ``tasking`` (None where the cast has no ground station or no
     UAV), the ``people`` and the ``uavs``; ``awaited``, the sets the
-    guidance takes up once solved while it answers from coarser ones."""
+    guidance answers from provisional ones until they are solved, and
+    ``adopt(queries)``, which hands them to the guidance and UAV tasking."""
 
     people: dict[str, HumanAgent]
     referee: Referee | None = None
@@ -80,6 +87,7 @@ class Cast:
     tasking: list = field(default_factory=list)
     uavs: dict[str, UavAgent] = field(default_factory=dict)
     awaited: AwaitedSets | None = None
+    adopt: Callable[[CtfQueries], None] | None = None
 
     @property
     def ground(self) -> list:
@@ -139,7 +147,8 @@ def build_cast(
         raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
     tasking = [game.tasker()] if scenario.uavs else []
     guidance = game.guidance(ctf_progress)
-    return Cast(crowd, game.referee(on_truth=judge == "truth"), guidance, tasking, fleet, game.awaited)
+    adopt = game.adopt if game.awaited is not None else None
+    return Cast(crowd, game.referee(on_truth=judge == "truth"), guidance, tasking, fleet, game.awaited, adopt)
 
 
 def simulated_autopilot(scenario: Scenario, spec, seed: int) -> SimulatedAutopilot:
@@ -209,16 +218,19 @@ class _CtfGame:
         """The game's sets; provisional ones while its own are not in the cache, if so asked."""
         if self._solved is None:
             s = self.scenario
-            game = CtfGame(s.map, s.rules.grid, self.rules)
-            found = None if self.provisional is None else cached(game, s.rules.stages)
-            if self.provisional is not None and found is None:
-                coarse = CtfGame(s.map, self.provisional, self.rules)
-                found = load_or_solve(coarse, s.rules.stages, progress=progress)
-                self.awaited = AwaitedSets(game, s.rules.stages, self.provisional, self.adopt)
-            elif found is None:
-                found = load_or_solve(game, s.rules.stages, progress=progress)
+            self.awaited = self.awaiting()
+            grid = s.rules.grid if self.awaited is None else self.awaited.provisional
+            found = load_or_solve(CtfGame(s.map, grid, self.rules), s.rules.stages, progress=progress)
             self._solved = CtfQueries(found.solution)
         return self._solved
+
+    def awaiting(self) -> AwaitedSets | None:
+        """The sets to answer from provisional ones until they are solved, if any."""
+        s = self.scenario
+        own = CtfGame(s.map, s.rules.grid, self.rules)
+        if self.provisional is None or stored(own, s.rules.stages):
+            return None
+        return AwaitedSets(own, s.rules.stages, self.provisional)
 
     def adopt(self, queries: CtfQueries) -> None:
         """Answer from ``queries`` from now on, in the guidance and the UAV tasking alike."""

@@ -1,7 +1,9 @@
 """Launching a live run: every peer its own process over Zenoh on this host.
 
 The launcher solves what the ground station will need first (so no peer
-starts against an empty cache), listens on a free loopback port that every
+starts against an empty cache): the scenario's sets, or provisional ones
+a ``provisional`` ground station answers from until the scenario's, solved
+behind the game, are in the cache. It listens on a free loopback port that every
 peer connects to, starts the ground station and one walker per agent (and for each UAV a
 ``bearcat vehicle`` emulator on its own UDP port, PX4 SITL's 14540 + i
 convention moved to free ports, with a UAV peer flying it), waits

@@ -65,6 +65,7 @@ async def run_peer(
     network: str = "shim",
     lease: float | None = None,
     awaited=None,
+    adopt=None,
     say=None,
 ) -> str:
     """Drive ``agents`` on ``session`` until the game ends; why it stopped,
@@ -72,8 +73,8 @@ async def run_peer(
     way out, while the loop still stands, so no late sample is handed to it.
     ``faults`` is the run's fault plan, ``network`` where it runs; with a
     ``lease``, the peer stops when the ground station has been gone that long.
-    ``awaited`` (``cast.AwaitedSets``) are the sets to take up once they
-    are in the cache, which ``say`` is told of."""
+    ``awaited`` (``cast.AwaitedSets``) are the sets to hand to ``adopt``
+    once they are in the cache, which ``say`` is told of."""
     loop = asyncio.get_running_loop()
     clock = WallClock()
     record = record or EventLog(None)
@@ -201,7 +202,7 @@ async def run_peer(
         try:
             while (found := await loop.run_in_executor(None, cached, awaited.game, awaited.stages)) is None:
                 await asyncio.sleep(AWAIT_POLL)
-            awaited.adopt(CtfQueries(found.solution))
+            adopt(CtfQueries(found.solution))
         except Exception as exc:  # the game goes on, on the provisional sets
             log.warning("the %d-point sets were not taken up (%s); guidance stays on provisional sets", grid, exc)
             return
@@ -284,10 +285,10 @@ def start_peer(
     profile = load_profile(netem)
     lease_ms = round(1000 * scenario.lease)
     autopilot = None
-    awaited = None
+    players = None
     if role == "ground-station":
         players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge, provisional=provisional)
-        agents, name, awaited = players.ground, players.guidance.name, players.awaited
+        agents, name = players.ground, players.guidance.name
     elif role == "uav":
         from bearcat.agents.uav.autopilot import MavsdkAutopilot
 
@@ -398,7 +399,8 @@ def start_peer(
             faults=faults,
             network=network,
             lease=scenario.lease,
-            awaited=awaited,
+            awaited=None if players is None else players.awaited,
+            adopt=None if players is None else players.adopt,
             say=say,
         )
         if role == "phone":

@@ -468,11 +468,12 @@ def test_a_run_whose_sets_are_not_cached_starts_on_provisional_ones_and_takes_it
     behind it (held here until the game is on, so the order is certain);
     the ground station takes those up mid-game, and they stay in the cache."""
     from bearcat.agents.ground_station.ctf_cache import cached, turn
+    from bearcat.scenarios.cast import awaited_sets
 
     monkeypatch.setenv("BEARCAT_CACHE_DIR", str(tmp_path / "cache"))
     path = tmp_path / "game.toml"
     path.write_text(PROVISIONAL)
-    awaited = build_cast(load_scenario(path), load_profile("ideal"), 0, people=[], provisional=True).awaited
+    awaited = awaited_sets(load_scenario(path))
     out = tmp_path / "run"
     with turn(awaited.game, awaited.stages):
         launcher = start_launcher(path, out)

@@ -99,7 +99,7 @@ def test_a_provisional_ground_station_answers_from_coarse_sets_then_exactly_as_o
     load_or_solve(awaited.game, awaited.stages)  # what the solve behind the game does
     found = cached(awaited.game, awaited.stages)
     assert found is not None and found.sources == {"return": "cache"}
-    awaited.adopt(CtfQueries(found.solution))
+    cast.adopt(CtfQueries(found.solution))
 
     own = ground(game)  # started once the game's own sets are in the cache
     assert own.awaited is None and own.guidance.advisor.solved.geometry.grid.shape == (17, 17)

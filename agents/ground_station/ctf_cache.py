@@ -186,13 +186,20 @@ def turn(game: CtfGame, stages: str, *, root: Path | None = None):
     return _turn((root or cache_root()) / "ctf" / f".{hashlib.sha256(names.encode()).hexdigest()[:16]}.lock")
 
 
+def stored(game: CtfGame, stages: str = "both", *, root: Path | None = None) -> bool:
+    """Whether the cache has an entry for every set of ``stages`` (whole or
+    damaged: loading tells), found without reading any."""
+    directory = (root or cache_root()) / "ctf"
+    return all(path.with_suffix(".json").exists() for path in _paths(game, stages, directory).values())
+
+
 def cached(game: CtfGame, stages: str = "both", *, root: Path | None = None) -> Solved | None:
     """The sets of ``stages`` if every one of them is in the cache, else
     None; never solves, never waits for a process that is solving them (an
     entry is whole once its metadata is there), so it can be asked often."""
-    directory = (root or cache_root()) / "ctf"
-    if not all(path.with_suffix(".json").exists() for path in _paths(game, stages, directory).values()):
+    if not stored(game, stages, root=root):
         return None
+    directory = (root or cache_root()) / "ctf"
     geometry = ctf_geometry(game.map, game.grid_points)
     known, paths = _loaded(game, stages, directory, geometry)
     if len(known) < len(paths):

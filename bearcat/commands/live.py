@@ -222,6 +222,7 @@ def register(subparsers) -> None:
 
 
 def run_live(args) -> int:
+    from bearcat.scenarios.cast import awaited_sets
     from bearcat.scenarios.launch import launch, preflight
 
     if args.network == "kernel":
@@ -248,15 +249,16 @@ def run_live(args) -> int:
     def say(text: str) -> None:
         print(text, flush=True)
 
-    awaited = solve_ahead(scenario, netem, provisional=not args.wait_for_sets)
+    awaited = None if args.wait_for_sets else awaited_sets(scenario)
     behind = None
-    if awaited is not None:
-        behind = SolveBehind(awaited)
-        say(
-            f"{scenario.name}: guidance starts on the {awaited.provisional}-point sets and takes up the "
-            f"{awaited.game.grid_points}-point sets once they are solved behind the game"
-        )
     try:
+        solve_ahead(scenario, netem, provisional=awaited is not None)
+        if awaited is not None:
+            behind = SolveBehind(awaited)
+            say(
+                f"{scenario.name}: guidance starts on the {awaited.provisional}-point sets and takes up the "
+                f"{awaited.game.grid_points}-point sets once they are solved behind the game"
+            )
         with writing(out, "run directory"):
             outcome = launch(
                 scenario,
