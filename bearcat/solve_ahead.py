@@ -8,9 +8,10 @@ write is named before anything else runs.
 
 A live run need not wait for a large grid: its ground station may start
 on provisional sets, solved in seconds, while ``SolveBehind`` solves the
-game's own sets into the cache in a child process at the lowest CPU
-priority, so the game's peers keep the processor they need. The ground
-station takes those sets up once they are there.
+game's own sets into the cache in a child process that runs only on a
+processor nothing else wants (Linux's SCHED_IDLE), so the game's peers
+keep the processor they need. The ground station takes those sets up once
+they are there.
 """
 
 from __future__ import annotations
@@ -52,7 +53,7 @@ def solve_ahead(scenario, netem: str, *, provisional: bool = False) -> None:
 
 class SolveBehind:
     """The ``awaited`` sets (``cast.AwaitedSets``) solved into the cache by
-    a child process at the lowest CPU priority, from the moment it is made.
+    a child process on otherwise idle processors, from the moment it is made.
     The child dies with this process. ``finish`` waits for it with a
     progress bar; ``stop`` ends it, leaving the sets for another run."""
 
@@ -110,8 +111,13 @@ class SolveBehind:
 
 
 def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
-    """The child's work: solve the game's ``stages`` into the cache, reporting in ``where``."""
-    os.nice(19)
+    """The child's work: solve the game's ``stages`` into the cache, reporting in ``where``.
+    Its threads (and the solver's, which inherit the policy) run only on a
+    processor nothing else wants, so a peer never waits for them."""
+    if hasattr(os, "SCHED_IDLE"):
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    else:  # not Linux: the lowest priority there is
+        os.nice(19)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the launcher's to handle: it stops this solve
     from bearcat.netem.kernel.commands import die_with_parent
 
