@@ -369,7 +369,7 @@ def run_phone(args) -> int:
     args.role, args.scenario, args.mode, args.listen = "phone", f"zenoh:{args.game}", "client", None
     args.faults = args.resume = args.vehicle = args.sysid = None
     args.seed = args.netem = args.transport = None
-    args.network, args.judge, args.emulated = "shim", "fixes", False
+    args.network, args.judge, args.emulated, args.provisional = "shim", "fixes", False, False
     server = _page_server(args)
     print(f"open {server.url()} on the phone of {args.id}\n{server.qr()}", flush=True)
     return run_peer(args)
