@@ -99,9 +99,10 @@ class SolveBehind:
                     time.sleep(0.2)
             except KeyboardInterrupt:
                 self.stop()
-                say(f"the {grid}-point sets were left unsolved; the next run starts on provisional sets again")
             finally:
                 bars.close()
+            if not self.solved:
+                say(f"the {grid}-point sets were left unsolved; the next run starts on provisional sets again")
         return self.solved
 
     def stop(self) -> None:
