@@ -7,14 +7,16 @@ default) and with ``--wait-for-sets``, in the same run.
     python benchmarks/first_game.py --scenario small-area --repeat 5 --provisional-only
 
 Each launch gets an empty set cache (and, with ``--cold``, an empty numba
-cache) and is stopped with Ctrl-C as soon as it says the game started, so
-the solve behind the game is not timed. Three marks, in seconds from the
-command: the launcher up (its router listening: imports, and with
-``--wait-for-sets`` the whole solve), the ground station's sets ready (the
-first ``sets`` line of its event log: its imports and the provisional solve,
-while the other peers start; sets loaded from the cache are ready before
-the launcher is up) and the game's start. The machine is shared and noisy:
-read the medians of several repeats.
+cache) and is stopped with Ctrl-C a few seconds after it says the game
+started, so the solve behind the game is not timed. Three marks, in seconds
+from the command: the launcher up (its router listening: imports, and with
+``--wait-for-sets`` the whole solve), the ground station up (the ``warmed``
+line of its event log: its imports, its sets loaded and its query code
+readied, while the other peers start) and the game's start; and how long
+the ground station took to answer the game's first pair of fixes with a
+full guidance (heading and region) once the game was on, in
+milliseconds. The machine is shared
+and noisy: read the medians of several repeats.
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ import time
 from bearcat.agents.ground_station.event_log import read_events
 
 MARKS = {"launcher up": re.compile(r"^network: "), "game started": re.compile(r"game started")}
+PLAYED = 3.0  # s of the game played before the launch is stopped, for its first guidance
 
 
 def first_game(scenario: str, cold: bool, wait: bool) -> dict[str, float]:
@@ -59,6 +62,8 @@ def first_game(scenario: str, cold: bool, wait: bool) -> dict[str, float]:
                     for mark, pattern in MARKS.items():
                         if mark not in seen and pattern.search(text):
                             seen[mark] = now
+            if "game started" in seen:
+                time.sleep(PLAYED)
             launcher.send_signal(signal.SIGINT)
             launcher.communicate(timeout=120)
         finally:
@@ -66,8 +71,15 @@ def first_game(scenario: str, cold: bool, wait: bool) -> dict[str, float]:
                 launcher.kill()
         if "game started" not in seen:
             raise RuntimeError(f"{' '.join(command)} ended without starting its game")
-        notes = [e["t"] for e in read_events(f"{scratch}/run/peers/gs.jsonl") if e["event"] == "sets"]
-        seen["sets ready"] = notes[0] - epoch if notes else seen["launcher up"]
+        events = list(read_events(f"{scratch}/run/peers/gs.jsonl"))
+        warmed = [e["t"] for e in events if e["event"] == "warmed"]
+        if not warmed:
+            raise RuntimeError("the ground station's event log has no 'warmed' line")
+        seen["gs up"] = warmed[0] - epoch
+        sent = [e for e in events if e["event"] == "sent"]
+        begun = min(e["t"] for e in sent if e["key"].endswith("/state") and e["message"]["phase"] == "running")
+        answers = [e for e in sent if "/guidance/" in e["key"] and e["message"]["value"] is not None and e["t"] > begun]
+        seen["first answer ms"] = (answers[0]["t"] - answers[0]["message"]["t"]) * 1e3 if answers else float("nan")
         return seen
 
 
@@ -80,7 +92,7 @@ def main() -> None:
     args = parser.parse_args()
     print(f"{args.scenario}: seconds from `bearcat run` to each mark, empty set cache", end="")
     print(", empty numba cache" if args.cold else ", numba's cache as it is", flush=True)
-    print(f"{'sets':>17} | launcher up | ground station's sets ready | game started (range)")
+    print(f"{'sets':>17} | launcher up | ground station up | game started (range) | first full answer, ms")
     medians = {}
     for wait in (False,) if args.provisional_only else (False, True):
         runs = [first_game(args.scenario, args.cold, wait) for _ in range(args.repeat)]
@@ -88,8 +100,9 @@ def main() -> None:
         begun = [run["game started"] for run in runs]
         kind = "full grid first" if wait else "provisional"
         print(
-            f"{kind:>17} | {median['launcher up']:11.1f} | {median['sets ready']:27.1f} | "
-            f"{median['game started']:.1f} ({min(begun):.1f}-{max(begun):.1f})",
+            f"{kind:>17} | {median['launcher up']:11.1f} | {median['gs up']:17.1f} | "
+            f"{median['game started']:.1f} ({min(begun):.1f}-{max(begun):.1f}){'':>9} | "
+            f"{median['first answer ms']:.1f}",
             flush=True,
         )
     if args.provisional_only:

@@ -8,6 +8,7 @@ and the agent's name, so adding an agent does not change another's draws.
 
 from __future__ import annotations
 
+import functools
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -79,7 +80,9 @@ class Cast:
     and UAV ``tasking`` (None where the cast has no ground station or no
     UAV), the ``people`` and the ``uavs``; ``awaited``, the sets the
     guidance answers from provisional ones until they are solved, and
-    ``adopt(queries)``, which hands them to the guidance and UAV tasking."""
+    ``adopt(queries)``, which hands them to the guidance and UAV tasking;
+    ``warm_up()``, which readies the guidance's compiled code off the game's
+    path (see ``GuidanceService.warm_up``)."""
 
     people: dict[str, HumanAgent]
     referee: Referee | None = None
@@ -88,6 +91,7 @@ class Cast:
     uavs: dict[str, UavAgent] = field(default_factory=dict)
     awaited: AwaitedSets | None = None
     adopt: Callable[[CtfQueries], None] | None = None
+    warm_up: Callable[[], None] | None = None
 
     @property
     def ground(self) -> list:
@@ -148,7 +152,10 @@ def build_cast(
     tasking = [game.tasker()] if scenario.uavs else []
     guidance = game.guidance(ctf_progress)
     adopt = game.adopt if game.awaited is not None else None
-    return Cast(crowd, game.referee(on_truth=judge == "truth"), guidance, tasking, fleet, game.awaited, adopt)
+    referee = game.referee(on_truth=judge == "truth")
+    starts = {a.id: a.start for a in scenario.agents}
+    warm_up = functools.partial(guidance.warm_up, starts)
+    return Cast(crowd, referee, guidance, tasking, fleet, game.awaited, adopt, warm_up)
 
 
 def simulated_autopilot(scenario: Scenario, spec, seed: int) -> SimulatedAutopilot:

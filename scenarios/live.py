@@ -67,6 +67,7 @@ async def run_peer(
     awaited=None,
     adopt=None,
     say=None,
+    warm_up=None,
 ) -> str:
     """Drive ``agents`` on ``session`` until the game ends; why it stopped,
     and how often each agent failed if any did. The session is closed on the
@@ -74,7 +75,9 @@ async def run_peer(
     ``faults`` is the run's fault plan, ``network`` where it runs; with a
     ``lease``, the peer stops when the ground station has been gone that long.
     ``awaited`` (``cast.AwaitedSets``) are the sets to hand to ``adopt``
-    once they are in the cache, which ``say`` is told of."""
+    once they are in the cache, which ``say`` is told of; ``warm_up()``
+    (``Cast.warm_up``) is run off the event loop before the peer says it is
+    up, so that the game starts with the guidance ready."""
     loop = asyncio.get_running_loop()
     clock = WallClock()
     record = record or EventLog(None)
@@ -171,8 +174,6 @@ async def run_peer(
         session.subscribe_liveliness(
             keys.alive(game, "ground-station", GROUND_PEERS[0]), lambda k, alive: soon(ground, k, alive)
         )
-    for agent in agents:
-        session.declare_token(keys.alive(game, agent.role, agent.name))
 
     async def ticker(agent):
         dispatch.start(agent)
@@ -210,6 +211,20 @@ async def run_peer(
         if say is not None:
             say(f"guidance answers from the {grid}-point sets from now on")
 
+    async def warm():
+        began = clock.now()
+        try:
+            await loop.run_in_executor(None, warm_up)
+        except Exception as exc:  # the game's own first queries will show what is wrong
+            log.warning("the guidance could not be readied before the game (%s)", exc)
+            return
+        done = clock.now()
+        record.note(done, "warmed", seconds=round(done - began, 3))
+
+    if warm_up is not None:
+        await warm()  # before the tokens: the launcher starts the game once every peer is up
+    for agent in agents:
+        session.declare_token(keys.alive(game, agent.role, agent.name))
     tasks = [asyncio.create_task(ticker(a)) for a in agents]
     if awaited is not None:
         tasks.append(asyncio.create_task(take_up()))
@@ -402,6 +417,7 @@ def start_peer(
             awaited=None if players is None else players.awaited,
             adopt=None if players is None else players.adopt,
             say=say,
+            warm_up=None if players is None else players.warm_up,
         )
         if role == "phone":
             return asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))

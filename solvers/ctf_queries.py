@@ -29,10 +29,11 @@ import numba
 import numpy as np
 import shapely
 
-from bearcat.solvers.ctf import EDGE_SLACK, CtfSolution, SetSolution
+from bearcat.solvers.ctf import EDGE_SLACK, CtfGeometry, CtfSolution, Rules, SetSolution
 from bearcat.solvers.errors import InputError
+from bearcat.solvers.grid import Grid
 
-__all__ = ["PHASES", "CtfQueries", "StateReport"]
+__all__ = ["PHASES", "CtfQueries", "StateReport", "compile_kernels"]
 
 PHASES = ("capture", "return")
 
@@ -63,6 +64,24 @@ class CtfQueries:
         self._lo = np.asarray(grid.lo * 2, np.float64)
         self._spacing = np.asarray(grid.spacing * 2, np.float64)
         self._axes = grid.axes()
+        # Read-only views whether the sets were just solved or loaded from a
+        # file: numba compiles a kernel once per argument type, and a flag
+        # that differed between processes would compile it once more.
+        self._values = {name: _read_only(s.value) for name, s in solution.sets.items()}
+        self._times = {name: _read_only(s.time_to_win) for name, s in solution.sets.items()}
+
+    def warm_up(self) -> None:
+        """Run every compiled kernel of the queries once on each set, for
+        the side effect: numba loads them from its cache, or compiles them
+        into it, now rather than at the game's first fix (see
+        ``CtfAdvisor.warm_up``)."""
+        middle = self._lo + self._spacing * (np.asarray(self.geometry.grid.shape * 2) - 1) / 2
+        interpolate_2d(self.geometry.blocked, self._lo[:2], self._spacing[:2], middle[:2])
+        for name, value in self._values.items():
+            _value_and_gradient(value, self._lo, self._spacing, middle)
+            if self._times[name] is not None:
+                _finite_gradient(self._times[name], self._lo, self._spacing, middle)
+            _slice(value, self._lo[:2], self._spacing[:2], middle[:2], True)
 
     def value_set(self, phase: str) -> SetSolution:
         """The set that decides the rest of the game in ``phase``: W_A (or
@@ -121,9 +140,9 @@ class CtfQueries:
         may be flat, the same on the time-to-win T* (the attacker hurries,
         the defender delays), as the end of thesis 3.4 prescribes."""
         state = self.check_state(attacker, defender)
-        value, gradient = _value_and_gradient(found.value, self._lo, self._spacing, state)
+        value, gradient = _value_and_gradient(self._values[found.name], self._lo, self._spacing, state)
         if value <= 0 and found.time_to_win is not None:
-            towards = _finite_gradient(found.time_to_win, self._lo, self._spacing, state)
+            towards = _finite_gradient(self._times[found.name], self._lo, self._spacing, state)
             if np.any(towards != 0):
                 gradient = towards
         return StateReport(float(value), _unit(-gradient[:2]), _unit(gradient[2:]))
@@ -132,13 +151,13 @@ class CtfQueries:
         """The value over defender positions with the attacker held at
         ``attacker``: ``> 0`` is R_D(x_a) (or F_D, W_D by phase)."""
         point = self.check_point("attacker", attacker)
-        return _slice(self.value_set(phase).value, self._lo[:2], self._spacing[:2], point, True)
+        return _slice(self._values[self.value_set(phase).name], self._lo[:2], self._spacing[:2], point, True)
 
     def attacker_region_values(self, defender, phase: str = "capture") -> np.ndarray:
         """The value over attacker positions with the defender held at
         ``defender``: ``<= 0`` is R_A(x_d) (or F_A, W_A by phase)."""
         point = self.check_point("defender", defender)
-        return _slice(self.value_set(phase).value, self._lo[2:], self._spacing[2:], point, False)
+        return _slice(self._values[self.value_set(phase).name], self._lo[2:], self._spacing[2:], point, False)
 
     def defender_region(self, attacker, phase: str = "capture") -> np.ndarray:
         """R_D(x_a) as a mask over the grid of one player."""
@@ -175,6 +194,29 @@ class CtfQueries:
         return (
             shapely.MultiPolygon(shapely.get_parts(shapely.union_all(polygons))) if polygons else shapely.MultiPolygon()
         )
+
+
+def compile_kernels(dtype=np.float32) -> None:
+    """Load or compile the query kernels for sets held in ``dtype``, with no
+    game solved: on a blank game of five nodes a side. A kernel is compiled
+    per argument type, not per grid, and every game's sets reach the
+    kernels as the blank one's do (read-only arrays of ``dtype``, positions
+    in float64), so a process that runs this fills numba's cache for every
+    ground station after it."""
+    grid = Grid((0.0, 0.0), (1.0, 1.0), (5, 5))
+    inside = -np.ones(grid.shape)
+    geometry = CtfGeometry(grid, blocked=np.ones(grid.shape), flag=inside, home=inside, terrain=np.ones(grid.shape))
+    blank = np.zeros(grid.shape * 2, dtype)
+    sets = {"return": SetSolution("return", blank, False, None, 0.0, 0, blank)}
+    CtfQueries(CtfSolution(geometry, Rules(), sets)).warm_up()
+
+
+def _read_only(a: np.ndarray | None) -> np.ndarray | None:
+    if a is None:
+        return None
+    view = a.view()
+    view.flags.writeable = False
+    return view
 
 
 def _unit(v: np.ndarray) -> tuple[float, float] | None:

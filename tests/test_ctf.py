@@ -568,3 +568,57 @@ def test_processes_after_the_same_sets_solve_them_once_and_the_others_load_them(
     sources = [json.loads(p.communicate(timeout=300)[0]) for p in solvers]
     assert sorted(s["return"] for s in sources) == ["cache", "cache", "solved"]
     assert sorted(s["win"] for s in sources) == ["cache", "cache", "solved"]
+
+
+WARMED = """
+import json, sys
+import numpy as np
+from bearcat.maps import load_map
+from bearcat.maps.ctf import ctf_geometry
+from bearcat.solvers import ctf_queries
+from bearcat.solvers.ctf import CtfSolution, Rules, SetSolution, solve_ctf
+
+ctf_queries.compile_kernels()  # before any real game, as the launcher's child does
+kernels = ("interpolate_2d", "_value_and_gradient", "_finite_gradient", "_slice")
+counts = lambda: [len(getattr(ctf_queries, k).signatures) for k in kernels]
+warmed = counts()
+geometry = ctf_geometry(load_map("ctf-10"), 21)
+solved = solve_ctf(geometry, Rules(), "return", scheme="first")
+queries = ctf_queries.CtfQueries(solved)
+queries.warm_up()
+# The same sets as a ground station loads them from the cache: read-only arrays.
+frozen = {}
+for name, s in solved.sets.items():
+    value, tstar = s.value.copy(), s.time_to_win.copy()
+    value.flags.writeable = tstar.flags.writeable = False
+    frozen[name] = SetSolution(name, value, s.converged, s.converged_at, s.time, s.steps, tstar)
+loaded = ctf_queries.CtfQueries(CtfSolution(geometry, solved.rules, frozen))
+axes = [a for a in geometry.grid.axes()]
+inside = 0
+for x in axes[0][2:-2:3]:
+    for y in axes[1][2:-2:3]:
+        for u, v in ((x, y), (axes[0][-3], axes[1][2])):
+            for q in (queries, loaded):
+                try:
+                    inside += q.evaluate((x, y), (u, v), "return").value <= 0
+                    q.defender_region_values((x, y), "return")
+                    q.attacker_region_values((u, v), "return")
+                except ctf_queries.InputError:
+                    pass
+print(json.dumps({"warmed": warmed, "after": counts(), "inside": int(inside)}))
+"""
+
+
+def test_kernels_compiled_on_a_blank_game_serve_every_query_of_a_real_one():
+    """After ``compile_kernels`` (on a blank game, as ``bearcat run`` does
+    while it solves) no query of a real game compiles a kernel again: not
+    its warm-up, not inside the set (T*'s gradient), not on sets just solved
+    nor on sets loaded read-only as a ground station loads them. So the
+    ground station finds every kernel in numba's cache and, having warmed
+    up, never stalls in the game. A process of its own, so no other test's
+    calls count."""
+    done = subprocess.run([sys.executable, "-c", WARMED], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    assert found["inside"] > 0, found
+    assert all(n >= 1 for n in found["warmed"]) and found["after"] == found["warmed"], found

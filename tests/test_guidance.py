@@ -212,6 +212,26 @@ def test_robust_advice_is_the_plain_one_for_fresh_exact_fixes_and_cautious_for_s
     assert plain("a", fixes, 3.0)["go"] is True
 
 
+def test_a_warmed_up_advisor_answers_every_fix_as_a_fresh_one_does(ctf10_game):
+    """The warm-up keeps nothing that would stand in for a later answer: at
+    the very positions it answered, with stale fixes that grow the robust
+    disks, and after the phase changes."""
+    ctf10, queries = ctf10_game
+    common = dict(attacker="a", defender="d", phase="capture", robust=["a", "d"])
+    warmed, fresh = CtfAdvisor(ctf10, queries, **common), CtfAdvisor(ctf10, queries, **common)
+    a, d = (2.0, 2.0), (6.0, 6.0)
+    warmed.warm_up({"a": a, "d": d})
+    fixes = LatestFixes(ctf10)
+    fixes.take(fix(ctf10, "a", a, 1.0))
+    fixes.take(fix(ctf10, "d", d, 1.0))
+    for now in (1.0, 1.5, 3.0):
+        for agent in ("a", "d"):
+            assert warmed(agent, fixes, now) == fresh(agent, fixes, now)
+    for advisor in (warmed, fresh):
+        advisor.phase = "return"
+    assert warmed("a", fixes, 3.0) == fresh("a", fixes, 3.0)
+
+
 def test_robust_open_loop_guidance_grows_each_defenders_capture_disk_by_its_uncertainty():
     """Fresh exact fixes give the plain answer; a defender fix grown stale
     (a 10 m/s defender whose fix is 11 s old may be 110 m away) cuts the safe
@@ -229,3 +249,17 @@ def test_robust_open_loop_guidance_grows_each_defenders_capture_disk_by_its_unce
     stale = robust("a", fixes, 12.0)
     assert plain("a", fixes, 12.0)["go"] is True
     assert stale["go"] is False and stale["uncertain"]
+
+
+@pytest.mark.parametrize("name", ["pursuit-field", "open-loop"])
+def test_each_games_guidance_warms_up_at_its_scenarios_starts_and_keeps_no_answer(name):
+    """What a ground station peer runs before it says it is up: every
+    player's start is where its advisor looks, and nothing is kept that a
+    fix of the game would be answered from."""
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import build_cast
+    from bearcat.scenarios.schema import load_scenario
+
+    cast = build_cast(load_scenario(name), load_profile("ideal"), 0, people=[], ground=True)
+    cast.warm_up()
+    assert cast.guidance.advisor._last in ({}, None)

@@ -1,5 +1,6 @@
 """Live runs: every peer a real process on real Zenoh sessions over loopback.
-A game finishes and leaves no process behind; a walker killed mid-game is
+A game finishes, with the ground station's guidance readied before it
+starts, and leaves no process behind; a walker killed mid-game is
 seen gone within two seconds and ends the game with that reason; garbage
 published on every key of the game is dropped and counted while the game
 goes on; an agent's exceptions are recorded and counted while its peer goes
@@ -74,6 +75,12 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
     kinds = {e["message"]["type"] for e in events if e["event"] == "sent"}
     assert {"fix", "truth", "guidance", "state", "control"} <= kinds
     assert (out / "recording.rrd").exists() and "bearcat view" in output
+    # The ground station says it is up only once its guidance has answered
+    # once, so the game's first fixes do not wait for numba to load its code.
+    gs = read_events(out / "peers" / "gs.jsonl")
+    warmed = [e["t"] for e in gs if e["event"] == "warmed"]
+    running = min(e["t"] for e in gs if e["event"] == "sent" and e["message"].get("phase") == "running")
+    assert len(warmed) == 1 and warmed[0] < running, (warmed, running)
 
 
 def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path):

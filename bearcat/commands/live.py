@@ -11,7 +11,7 @@ from bearcat.scenarios.faults import GROUND, load_faults
 from bearcat.scenarios.peers import NETWORKS
 from bearcat.scenarios.run_directory import fresh
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
-from bearcat.solve_ahead import SolveBehind, solve_ahead
+from bearcat.solve_ahead import SolveBehind, compile_queries_behind, solve_ahead
 from bearcat.writing import make_directory, writing
 
 
@@ -251,6 +251,8 @@ def run_live(args) -> int:
 
     awaited = None if args.wait_for_sets else awaited_sets(scenario)
     behind = None
+    # A first run of the game is likely a fresh clone's: numba's cache may be empty.
+    compiling = compile_queries_behind() if awaited is not None else None
     try:
         solve_ahead(scenario, netem, provisional=awaited is not None)
         if awaited is not None:
@@ -284,6 +286,9 @@ def run_live(args) -> int:
     finally:
         if behind is not None:
             behind.stop()
+        if compiling is not None:
+            compiling.terminate()
+            compiling.join()
     if args.viewer:
         _open_viewer(out / "recording.rrd")
     return 0 if outcome.ended else 1

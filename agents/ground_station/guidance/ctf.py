@@ -62,6 +62,24 @@ class CtfAdvisor:
         self._regions: dict[str, tuple[tuple, list]] = {}
         self._last: dict[str, tuple[tuple, dict]] = {}
 
+    def warm_up(self, starts) -> None:
+        """Run the query kernels, then answer each side once with the
+        players at ``starts`` (agent -> map point; robustly too where
+        asked), and keep nothing. The first queries of a process load the
+        compiled kernels from numba's cache (a third of a second) or, after
+        a fresh clone, compile them (two seconds), and the first outline
+        traced loads contourpy and shapely: see ``GuidanceService.warm_up``.
+        It may run on another thread than the game's queries: those only
+        read, and the robust region it may keep is the one the same fixes
+        would give."""
+        self.solved.warm_up()
+        a, d = (np.asarray(starts[who], float) for who in (self.attacker, self.defender))
+        radius = min(self.solved.geometry.grid.spacing)
+        for agent in (self.attacker, self.defender):
+            self.answer_at(agent, a, d)
+            if agent in self.robust_for:
+                self.answer_at(agent, a, d, (radius, radius))
+
     def state(self, message: GameState) -> None:
         self.phase = "capture" if message.flag_holder is None else "return"
 

@@ -56,6 +56,13 @@ class ReachAvoidAdvisor:
     def state(self, message: GameState) -> None:
         self.stage = 0 if message.flag_holder is None else min(1, len(self.masks) - 1)
 
+    def warm_up(self, starts) -> None:
+        """Solve once with everyone at ``starts`` and keep nothing (see
+        ``GuidanceService.warm_up``)."""
+        self._answer(
+            [np.asarray(starts[a], float) for a in (self.attacker, *self.defenders)], [0.0] * len(self.defenders)
+        )
+
     def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
         latest = fixes.latest
         if agent != self.attacker:

@@ -33,6 +33,15 @@ class PursuitAdvisor:
     def state(self, message: GameState) -> None:
         pass
 
+    def warm_up(self, starts) -> None:
+        """Answer the first pursuer once with everyone at ``starts`` and keep
+        nothing (see ``GuidanceService.warm_up``)."""
+        self._answer(
+            self.pursuers[0],
+            np.asarray(starts[self.evader], float),
+            np.array([starts[p] for p in self.pursuers], float),
+        )
+
     def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
         latest = fixes.latest
         if agent not in self.pursuers or any(a not in latest for a in (self.evader, *self.pursuers)):

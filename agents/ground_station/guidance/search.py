@@ -31,6 +31,9 @@ class SearchAdvisor:
     def state(self, message: GameState) -> None:
         self.ctf.state(message)
 
+    def warm_up(self, starts) -> None:
+        self.ctf.warm_up(starts)
+
     def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
         fields = {**self.ctf(agent, fixes, now), "game": "search"}
         if agent in self.side:
