@@ -74,6 +74,12 @@ def awaited_sets(scenario: Scenario) -> AwaitedSets | None:
     return _CtfGame(scenario, provisional=True).awaiting() if scenario.game == "ctf" else None
 
 
+def unsolved(scenario: Scenario) -> bool:
+    """Whether ``scenario`` is a capture-the-flag game whose own sets are not
+    in the cache yet: its first run, on a fresh clone perhaps."""
+    return scenario.game == "ctf" and not stored(_CtfGame(scenario).own(), scenario.rules.stages)
+
+
 @dataclass
 class Cast:
     """Who plays a scenario: the ground station's ``referee``, ``guidance``
@@ -231,13 +237,16 @@ class _CtfGame:
             self._solved = CtfQueries(found.solution)
         return self._solved
 
+    def own(self) -> CtfGame:
+        """The game on the scenario's own grid."""
+        return CtfGame(self.scenario.map, self.scenario.rules.grid, self.rules)
+
     def awaiting(self) -> AwaitedSets | None:
         """The sets to answer from provisional ones until they are solved, if any."""
-        s = self.scenario
-        own = CtfGame(s.map, s.rules.grid, self.rules)
-        if self.provisional is None or stored(own, s.rules.stages):
+        own, stages = self.own(), self.scenario.rules.stages
+        if self.provisional is None or stored(own, stages):
             return None
-        return AwaitedSets(own, s.rules.stages, self.provisional)
+        return AwaitedSets(own, stages, self.provisional)
 
     def adopt(self, queries: CtfQueries) -> None:
         """Answer from ``queries`` from now on, in the guidance and the UAV tasking alike."""

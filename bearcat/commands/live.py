@@ -222,7 +222,7 @@ def register(subparsers) -> None:
 
 
 def run_live(args) -> int:
-    from bearcat.scenarios.cast import awaited_sets
+    from bearcat.scenarios.cast import awaited_sets, unsolved
     from bearcat.scenarios.launch import launch, preflight
 
     if args.network == "kernel":
@@ -251,8 +251,7 @@ def run_live(args) -> int:
 
     awaited = None if args.wait_for_sets else awaited_sets(scenario)
     behind = None
-    # A first run of the game is likely a fresh clone's: numba's cache may be empty.
-    compiling = compile_queries_behind() if awaited is not None else None
+    compiling = compile_queries_behind() if unsolved(scenario) else None  # numba's cache may be empty too
     try:
         solve_ahead(scenario, netem, provisional=awaited is not None)
         if awaited is not None:
