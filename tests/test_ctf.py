@@ -452,15 +452,21 @@ def test_the_flag_return_stage_is_shared_through_the_cache(game, tmp_path):
 
 
 @pytest.mark.parametrize("damage", ["garbage", "truncated", "not finite"])
-def test_a_damaged_cache_file_is_solved_again(game, tmp_path, damage):
-    """A set written with NaN (by a solver that overflowed) counts as damaged too."""
+def test_a_damaged_cache_file_is_solved_again(game, tmp_path, damage, caplog):
+    """A set written with NaN (by a solver that overflowed) counts as damaged
+    too. A ground station polling for the sets (``cached``) takes a damaged
+    one for one not there yet, quietly; the solve that replaces it says so."""
     first = load_or_solve(game, "both", root=tmp_path)
     path = first.paths["return"]
     if damage == "not finite":
         np.save(path, np.full_like(np.load(path), np.nan))
     else:
         path.write_bytes(b"\x93NUMPY garbage, not an array" * 4 if damage == "garbage" else path.read_bytes()[:300])
-    again = load_or_solve(game, "both", root=tmp_path)
+    with caplog.at_level("WARNING", logger=ctf_cache.__name__):
+        assert [ctf_cache.cached(game, "both", root=tmp_path) for _ in range(3)] == [None] * 3
+        assert not caplog.records
+        again = load_or_solve(game, "both", root=tmp_path)
+        assert [r.getMessage().count("unreadable") for r in caplog.records] == [1]
     assert again.sources == {"return": "solved", "win": "cache"}
     np.testing.assert_array_equal(again.solution.sets["return"].value, first.solution.sets["return"].value)
     assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "cache", "win": "cache"}

@@ -196,12 +196,15 @@ def stored(game: CtfGame, stages: str = "both", *, root: Path | None = None) -> 
 def cached(game: CtfGame, stages: str = "both", *, root: Path | None = None) -> Solved | None:
     """The sets of ``stages`` if every one of them is in the cache, else
     None; never solves, never waits for a process that is solving them (an
-    entry is whole once its metadata is there), so it can be asked often."""
+    entry is whole once its metadata is there), so it can be asked often.
+    A damaged entry counts as one not there yet, without a word: asked once
+    a second, a warning would repeat until whoever solves the sets, and
+    says so, replaces it."""
     if not stored(game, stages, root=root):
         return None
     directory = (root or cache_root()) / "ctf"
     geometry = ctf_geometry(game.map, game.grid_points)
-    known, paths = _loaded(game, stages, directory, geometry)
+    known, paths = _loaded(game, stages, directory, geometry, quiet=True)
     if len(known) < len(paths):
         return None
     return Solved(_solution(game, stages, geometry, known), dict.fromkeys(known, "cache"), paths)
@@ -258,11 +261,14 @@ def _paths(game: CtfGame, stages: str, directory: Path) -> dict[str, Path]:
     return {name: directory / f"{game.set_key(name)}.npy" for name in STAGES.get(stages, ())}
 
 
-def _loaded(game: CtfGame, stages: str, directory: Path, geometry) -> tuple[dict[str, SetSolution], dict[str, Path]]:
-    """The sets of ``stages`` the cache holds, and where each one is or goes."""
+def _loaded(
+    game: CtfGame, stages: str, directory: Path, geometry, *, quiet: bool = False
+) -> tuple[dict[str, SetSolution], dict[str, Path]]:
+    """The sets of ``stages`` the cache holds whole, and where each one is or
+    goes; a damaged one is passed over with a warning, unless ``quiet``."""
     paths = _paths(game, stages, directory)
     shape = geometry.joint_grid().shape
-    known = {name: found for name, path in paths.items() if (found := _load(path, shape)) is not None}
+    known = {name: found for name, path in paths.items() if (found := _load(path, shape, quiet)) is not None}
     return known, paths
 
 
@@ -314,7 +320,7 @@ def _fingerprint(packages: tuple[Path, ...]) -> str:
     return f"{version} numpy {np.__version__} numba {numba.__version__} source {source.hexdigest()[:16]}"
 
 
-def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
+def _load(path: Path, shape: tuple[int, ...], quiet: bool = False) -> SetSolution | None:
     meta_path = path.with_suffix(".json")
     if not (path.exists() and meta_path.exists()):
         return None
@@ -338,7 +344,8 @@ def _load(path: Path, shape: tuple[int, ...]) -> SetSolution | None:
             time_to_win,
         )
     except (OSError, EOFError, ValueError, KeyError, TypeError) as exc:
-        log.warning("cached set %s is unreadable (%s); solving it again", path, exc)
+        if not quiet:
+            log.warning("cached set %s is unreadable (%s); solving it again", path, exc)
         return None
 
 
