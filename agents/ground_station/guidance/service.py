@@ -77,9 +77,10 @@ class GuidanceService:
     def warm_up(self, starts) -> None:
         """Have the advisor answer once with the agents at ``starts`` (agent ->
         map point), keeping nothing. A process's first answer loads compiled
-        solver and query code, a fifth to a third of a second, or compiles it
-        after a fresh clone, two seconds; the ground station does this before
-        it says it is up, so no fix of the game waits for it."""
+        solver and query code from numba's cache (a fifth to a third of a
+        second in every game measured) or, after a fresh clone, compiles it
+        (two seconds for capture-the-flag); the ground station does this
+        before it says it is up, so no fix of the game waits for it."""
         if self.advisor is not None:
             self.advisor.warm_up(starts)
 
