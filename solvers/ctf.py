@@ -141,6 +141,7 @@ class SetSolution:
     time: float
     steps: int
     time_to_win: np.ndarray | None = None
+    node_updates: int | None = None  # None when loaded rather than solved
 
     @property
     def attacker_wins(self) -> np.ndarray:
@@ -148,7 +149,16 @@ class SetSolution:
 
     @classmethod
     def from_result(cls, name: str, result: ReachAvoidResult) -> SetSolution:
-        return cls(name, result.value, result.converged, result.converged_at, result.time, result.steps, result.tstar)
+        return cls(
+            name,
+            result.value,
+            result.converged,
+            result.converged_at,
+            result.time,
+            result.steps,
+            result.tstar,
+            result.node_updates,
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -199,12 +209,16 @@ def solve_ctf(
     known: dict[str, SetSolution] | None = None,
     progress: ProgressCallback | None = None,
     memory_limit: int | None = None,
+    local: bool = False,
 ) -> CtfSolution:
     """Solve the sets of ``stages`` (see ``STAGES``). A set counts as
     converged (thesis 3.3.2) once its value changes by less than ``tol``
     cells while the faster player crosses two cells; ``known`` supplies
     sets already solved (e.g. R_A from a cache), keyed like
-    ``CtfSolution.sets``."""
+    ``CtfSolution.sets``. ``local`` solves each set by the narrow band
+    (``solvers.hji.solve_reach_avoid``): the same sets and T*, with the
+    defender's margins clamped a few cells out (``CtfQueries`` says what
+    that leaves of the guidance)."""
     names = _stage_list(stages)
     known = dict(known or {})
     grid = geometry.joint_grid()
@@ -244,6 +258,7 @@ def solve_ctf(
             record_gradient=False,
             progress=report,
             memory_limit=limit,
+            local=local,
         )
         del target
         sets[name] = SetSolution.from_result(name, result)

@@ -16,6 +16,14 @@ Values are multilinear in the 4-D grid; gradients are central differences
 at the nodes (one-sided on the edges), interpolated the same way, which
 keeps headings continuous inside a cell. A state off the grid or inside an
 obstacle is refused rather than extrapolated.
+
+Sets of a local solve (``solve_ctf(..., local=True)``) answer every query
+the same but where the defender wins by more than a few cells: there the
+value is clamped at the solve's ceiling, so the margin reads "at least
+that", and, the value being flat, both headings are None, as the phones
+show where no direction is better than another. Winners, regions,
+polygons, the margin near the boundary and every heading inside the
+attacker's set (from T*) are those of the full grid.
 """
 
 from __future__ import annotations

@@ -53,6 +53,7 @@ problems, so ``tol`` is in value units and should sit above that.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from collections.abc import Callable
@@ -61,6 +62,7 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+from scipy import ndimage
 
 from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError, fraction, non_negative, positive
@@ -75,9 +77,15 @@ class _Scheme:
     order: int  # of the spatial derivatives
     stages: int  # Runge-Kutta stages per step
     buffers: int  # value-sized arrays the time stepping needs
+    band: int  # rows of a local solve's band each side of the front (see _NarrowBand)
 
 
-SCHEMES = {"weno5": _Scheme(5, 3, 3), "first": _Scheme(1, 1, 2)}
+# The band holds the WENO5 stencil's three cells and two more: at none more,
+# T* strayed by tens of steps where the value is nearly flat. First order
+# reads one cell but diffuses more: the clamp's edge (``_NarrowBand``) must
+# lie farther out, and with 8 rows T* on the line game of Fig. 3.2 was up to
+# 1.8 steps late, with 10 within a step.
+SCHEMES = {"weno5": _Scheme(5, 3, 3, 5), "first": _Scheme(1, 1, 2, 10)}
 
 # (a, b) of each stage out = a * u0 + b * (v + dt L(v)) (Shu & Osher 1988).
 _SHU_OSHER = {1: ((0.0, 1.0),), 3: ((0.0, 1.0), (0.75, 0.25), (1.0 / 3.0, 2.0 / 3.0))}
@@ -102,19 +110,31 @@ class ReachAvoidResult:
     unreliable (end of thesis 3.4); ``record_gradient=False`` leaves it out
     (None) to save ``ndim`` arrays, for callers that take the direction from
     the gradient of ``tstar`` itself, the time-to-reach whose level sets are
-    the fronts (eq. 3.6)."""
+    the fronts (eq. 3.6).
+
+    ``node_updates`` counts node time steps (each of ``stages`` Runge-Kutta
+    stages): ``grid.size * steps`` on the full grid, less for a ``local``
+    solve. ``ceiling`` is None on the full grid; on a local solve, the
+    value at which values above the set are clamped (``solve_reach_avoid``
+    says what that leaves right)."""
 
     value: np.ndarray
     converged: bool
     converged_at: float | None
     time: float
     steps: int
+    node_updates: int = 0
+    ceiling: float | None = None
     tstar: np.ndarray | None = None
     tstar_gradient: np.ndarray | None = None
 
     @property
     def reach_avoid_set(self) -> np.ndarray:
         return self.value <= 0
+
+    @property
+    def local(self) -> bool:
+        return self.ceiling is not None
 
 
 class PaddedField:
@@ -173,6 +193,7 @@ def solve_reach_avoid(
     monotone: bool = True,
     progress: Callable[[float, float], None] | None = None,
     memory_limit: int | None = None,
+    local: bool = False,
 ) -> ReachAvoidResult:
     """The reach-avoid set of ``target`` (``l``, <= 0 inside) avoiding
     ``avoid`` (``g``, <= 0 inside; None for none) within ``horizon``.
@@ -192,7 +213,20 @@ def solve_reach_avoid(
     ``min[0, H]``; it keeps any dip of that ripple, so the set may gain a
     band as thin as the ripple. ``memory_limit`` (bytes) defaults to the free physical memory; a grid
     whose arrays would not fit (``required_bytes``) is refused before
-    anything is allocated. Grids need at least two dimensions."""
+    anything is allocated. Grids need at least two dimensions.
+
+    ``local`` updates only a narrow band around the front (``_NarrowBand``;
+    Adalsteinsson and Sethian 1995, Peng et al. 1999). The set and T* (with
+    its gradient) are the full grid's up to a cell and a step, but for the
+    few nodes the front passes at a tangent, where T* is as uncertain on
+    the full grid itself. Other values are the full grid's only near the
+    front: above the set they are clamped at ``ReachAvoidResult.ceiling``,
+    a few cells of the value's rise out, so a value there means "at least
+    that much" and its gradient, which is zero, names no direction; inside
+    the set, beyond the band, they are the last the band gave, less deep
+    than the full grid's. Regions, polygons, winners, T* and headings
+    drawn from T* are right everywhere; headings drawn from the value's
+    gradient outside the set only where the value is below the ceiling."""
     if not isinstance(grid, Grid):
         raise InputError(f"grid must be a solvers.grid.Grid, got {type(grid).__name__}")
     sch = _scheme(scheme)
@@ -236,6 +270,9 @@ def solve_reach_avoid(
     else:
         u = np.negative(avoid)
         np.maximum(u, target, out=u)
+    band = _NarrowBand(grid, sch.band, u, avoid) if local else None
+    if band is not None:
+        band.clamp(u, avoid)
     kern.fill_ghosts(u, np.asarray(grid.shape, np.int64), ham.edge_sign)
     # Copies rather than empty arrays, so no buffer ever holds uninitialised
     # values that the convergence check would read.
@@ -246,16 +283,18 @@ def solve_reach_avoid(
     with_gradient = record_tstar and record_gradient
     tgrad = np.zeros(grid.size * grid.ndim, dtype) if with_gradient else np.zeros(0, dtype)
     stepper = _Stepper(grid, sch, dtype, target, avoid, ham.args, record_tstar, tstar, tgrad, monotone)
-
-    t, steps, converged_at = 0.0, 0, None
-    with ThreadPoolExecutor(max_workers=len(stepper.ranges)) as pool:
+    t, steps, converged_at, updates = 0.0, 0, None, 0
+    with ThreadPoolExecutor(max_workers=stepper.threads) as pool:
         while t < horizon and converged_at is None:
             window = min(check_every, horizon - t)
             n_steps = max(1, math.ceil(window / dt_max - 1e-9))
             dt = window / n_steps
             np.copyto(snapshot, buffers[0])
             for k in range(n_steps):
+                if band is not None:
+                    band.rebuild(pool, buffers, stepper)
                 stepper.step(pool, buffers, dt, t + k * dt)
+                updates += stepper.nodes
             steps += n_steps
             t += window
             change = float(kern.max_abs_difference(buffers[0], snapshot))
@@ -277,6 +316,8 @@ def solve_reach_avoid(
         converged_at=converged_at,
         time=t,
         steps=steps,
+        node_updates=updates,
+        ceiling=None if band is None else band.cap,
         tstar=tstar.reshape(grid.shape) if record_tstar else None,
         tstar_gradient=tgrad.reshape(grid.shape + (grid.ndim,)) if with_gradient else None,
     )
@@ -302,9 +343,23 @@ class _Stepper:
             *ham_args,
         )
         self.tstar, self.tgrad = tstar, tgrad
-        planes = grid.size // (grid.shape[-1] * grid.shape[-2])
-        n = max(1, min(planes, numba.get_num_threads()))
-        self.ranges = [(i * planes // n, (i + 1) * planes // n) for i in range(n)]
+        self.threads = max(1, numba.get_num_threads())
+        self.use(kern.plane_blocks(grid.shape))
+
+    def use(self, blocks: np.ndarray) -> None:
+        """Update the nodes of ``blocks`` from now on, split between the
+        threads in ranges of about equal node counts that end at a plane's
+        end (the kernel refreshes a plane's ghosts after its last block)."""
+        self.blocks = blocks
+        self.nodes = int(np.dot(blocks[:, 2], blocks[:, 4]))
+        if len(blocks) == 0:  # a set that is empty or fills the grid has no front
+            self.ranges = [(0, 0)]
+            return
+        ends = np.flatnonzero(np.diff(blocks[:, 0], append=-1)) + 1  # block index after each plane
+        done = np.cumsum(blocks[:, 2] * blocks[:, 4])[ends - 1]  # nodes up to each plane's end
+        cuts = ends[np.searchsorted(done, self.nodes * np.arange(1, self.threads) / self.threads)]
+        bounds = sorted({0, *(int(c) for c in cuts), len(blocks)})
+        self.ranges = list(itertools.pairwise(bounds))
 
     def step(self, pool, buffers, dt: float, t: float) -> None:
         """One time step from time ``t``; the new value ends up in ``buffers[0]``."""
@@ -315,6 +370,7 @@ class _Stepper:
         for i, ((a, b), v, out) in enumerate(zip(_SHU_OSHER[self.stages], sources, outs)):
             final = i == self.stages - 1
             args = (
+                self.blocks,
                 v,
                 u,
                 out,
@@ -335,6 +391,98 @@ class _Stepper:
                 for f in [pool.submit(kern.stage, *r, *args) for r in self.ranges]:
                     f.result()
         buffers[0], buffers[1] = buffers[1], buffers[0]
+
+
+class _NarrowBand:
+    """The nodes a local solve updates: whole rows of the grid, those within
+    ``radius`` rows (along every axis but the last at once) of a row that
+    the zero level crosses, rebuilt before every step. The front moves less
+    than a cell per step (the CFL bound), so it never leaves the band, and
+    the next front is sought inside the band only. The whole zero level
+    counts, walls of the avoid set included: a front can creep along such a
+    wall, and leaving the wall out lost a strip of the first-order line game
+    of Fig. 3.2.
+
+    Values the band no longer moves must be those that moving them would
+    give, or the front, meeting them at the band's edge, goes astray: left
+    as they were, the values ahead of the front stayed as far above the
+    full grid's as the front had come, and over a 20 s solve of the open
+    square the front lagged by up to 66 steps. So the initial value is
+    clamped from above at ``cap``, as Peng et al. clamp theirs at the band's
+    edge: a flat value stays flat under the Hamiltonian, so values beyond
+    the band are the same whether updated or not, and the clamp's edge,
+    ``radius`` cells of the value's rise at its zero level out, lies in the
+    band, where it moves like any other level (``SCHEMES`` says how far out
+    each scheme needs it). ``cap`` is never below the avoid set's highest
+    ``-g``, the band widening to match: a ridge above the clamp would slope
+    the wrong way round its wall, along which fronts creep. Below zero
+    nothing is clamped: beyond the band the set's interior stays less deep
+    than the full grid's, which the front, moving outward, does not read.
+
+    Whole rows keep the kernel's loops long: a block costs about 0.7 us
+    more than its nodes however short it is (measured on 35^4 grids), so
+    bands cut to the node would cost more than they save."""
+
+    def __init__(self, grid: Grid, radius: int, initial: np.ndarray, avoid) -> None:
+        self.grid = grid
+        self.shape = np.asarray(grid.shape, np.int64)
+        self.radius = radius
+        rise = _front_slope(_padded_view(initial, grid))
+        self.cap = self.radius * rise
+        ridge = -float(np.min(_padded_view(avoid, grid))) if avoid is not None else -math.inf
+        if ridge > self.cap:
+            self.cap = ridge
+            self.radius = math.ceil(ridge / rise - 1e-6)
+        self.rows = np.zeros(grid.shape[:-1], np.uint8)
+        self.band = np.ones(grid.shape[:-1], np.uint8)
+
+    def clamp(self, u: np.ndarray, avoid) -> None:
+        """Clamp the initial value ``u`` (padded, before its ghosts are
+        made) at ``cap``, the avoid rule kept."""
+        np.minimum(u, self.cap, out=u)
+        if avoid is not None:
+            np.maximum(u, np.negative(avoid), out=u)
+
+    def rebuild(self, pool, buffers, stepper) -> None:
+        self.rows[...] = 0
+        planes, n = self.rows.size // self.grid.shape[-2], stepper.threads
+        cuts = [(i * planes // n, (i + 1) * planes // n) for i in range(n)]
+        # A row pair across planes may be marked from both sides of a cut:
+        # the marks are idempotent bytes, so the race is harmless.
+        self._each(pool, cuts, kern.front_rows, buffers[0], self.shape, self.band.reshape(-1), self.rows.reshape(-1))
+        band = _dilated(self.rows, self.radius)
+        # Rows leaving the band keep their value; the stage buffers must
+        # hold it too, since stencils of band nodes read them there.
+        leaving = (self.band > band).view(np.uint8).reshape(-1)
+        for b in buffers[1:]:
+            self._each(pool, cuts, kern.copy_rows, buffers[0], b, leaving, self.shape)
+        self.band = band
+        stepper.use(kern.row_blocks(band.reshape(-1), self.shape))
+
+    @staticmethod
+    def _each(pool, cuts, kernel, *args) -> None:
+        for f in [pool.submit(kernel, *c, *args) for c in cuts]:
+            f.result()
+
+
+def _dilated(rows: np.ndarray, radius: int) -> np.ndarray:
+    for axis in range(rows.ndim):
+        rows = ndimage.maximum_filter1d(rows, 2 * radius + 1, axis=axis, mode="constant")
+    return rows
+
+
+def _front_slope(u: np.ndarray) -> float:
+    """The rise of ``u`` over one cell at its zero level: the 90th
+    percentile, over pairs of neighbours on either side of zero along any
+    axis, of their difference (1 when the grid has no such pair)."""
+    rises = []
+    for axis in range(u.ndim):
+        below = np.moveaxis(u, axis, 0)
+        a, b = below[:-1], below[1:]
+        crossing = (a <= 0) != (b <= 0)
+        rises.append(np.abs(b[crossing] - a[crossing]))
+    rises = np.concatenate(rises)
+    return float(np.percentile(rises, 90)) if rises.size else 1.0
 
 
 def _scheme(name: str) -> _Scheme:

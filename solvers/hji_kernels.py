@@ -15,6 +15,11 @@ plane's rows taken as one run (ghost columns included and overwritten
 afterwards), so the loops are long and vectorise, and only plane-sized
 scratch exists besides the value buffers. Neighbour planes along the outer
 axes are read in place; only planes beyond the grid edge are made up.
+
+The stage kernel works on blocks (``_block_layout``): whole planes for the
+full-grid solve, or pieces of single rows, so that a solve can update only
+the nodes that need it (the narrow band around the front) with the same
+arithmetic node for node.
 """
 
 from __future__ import annotations
@@ -67,11 +72,10 @@ def _weno5(d0, d1, d2, d3, d4, c):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx, order, k, left, right):
-    """Left and right derivatives along one axis for a whole run; ``r3`` is
-    the run itself and ``r0``..``r6`` its neighbours at offsets -3..3 along
-    the axis (first order reads only ``r2``..``r4``)."""
-    n = left.shape[0]
+def _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx, order, k, left, right, n):
+    """Left and right derivatives along one axis for the first ``n`` nodes
+    of a run; ``r3`` is the run itself and ``r0``..``r6`` its neighbours at
+    offsets -3..3 along the axis (first order reads only ``r2``..``r4``)."""
     if order == 1:
         for j in range(n):
             left[j] = (r3[j] - r2[j]) * inv_dx
@@ -100,7 +104,7 @@ def _beyond(edge, inner, distance, sign):
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def _ghost(edge, inner, distance, sign, out):
-    for j in range(out.shape[0]):
+    for j in range(edge.shape[0]):
         out[j] = _beyond(edge[j], inner[j], distance, sign)
 
 
@@ -204,15 +208,16 @@ def fill_ghosts(arr, shape, edge_sign):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _affine_plane(node0, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv):
-    """Lax-Friedrichs Hamiltonian of control-affine dynamics over the plane
-    whose first node is ``node0``, from the tabulated ``f0``, ``G``, ``K``
-    and dissipation coefficients (``tabulate``)."""
+def _affine_block(
+    node0, rows, cols, nb, stride, off, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv
+):
+    """Lax-Friedrichs Hamiltonian of control-affine dynamics over a block
+    (``_block_layout``) whose first node is ``node0``, from the tabulated
+    ``f0``, ``G``, ``K`` and dissipation coefficients (``tabulate``)."""
     ndim = f0s.shape[1]
-    W = nb + 6
-    for i in range(na):
-        for jj in range(nb):
-            j = i * W + 3 + jj
+    for i in range(rows):
+        for jj in range(cols):
+            j = i * stride + off + jj
             node = node0 + i * nb + jj
             h = 0.0
             diss = 0.0
@@ -235,24 +240,41 @@ def _affine_plane(node0, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, 
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _simple_motion_plane(
-    idx, na, nb, pl, pr, half, axis_player, player_sign, speed, speed_offset, speed_stride, spd, norm, dv
+def _simple_motion_block(
+    idx,
+    row0,
+    rows,
+    col0,
+    cols,
+    stride,
+    off,
+    n,
+    pl,
+    pr,
+    half,
+    axis_player,
+    player_sign,
+    speed,
+    speed_offset,
+    speed_stride,
+    spd,
+    norm,
+    dv,
 ):
-    """Lax-Friedrichs Hamiltonian ``sum_q sign_q v_q |p_q|`` over a plane,
-    with each axis's dissipation coefficient the local speed of its player."""
+    """Lax-Friedrichs Hamiltonian ``sum_q sign_q v_q |p_q|`` over the first
+    ``n`` entries of a block's run (``_block_layout``), with each axis's
+    dissipation coefficient the local speed of its player."""
     ndim = axis_player.shape[0]
     ka, kb = ndim - 2, ndim - 1
-    W = nb + 6
-    n = dv.shape[0]
     for q in range(player_sign.shape[0]):
         base = speed_offset[q]
         for k in range(ka):
             base += idx[k] * speed_stride[q, k]
         sa, sb = speed_stride[q, ka], speed_stride[q, kb]
-        for i in range(na):
-            row = spd[q, i * W + 3 : i * W + 3 + nb]
-            for jj in range(nb):
-                row[jj] = speed[base + i * sa + jj * sb]
+        for i in range(rows):
+            row = spd[q, i * stride + off : i * stride + off + cols]
+            for jj in range(cols):
+                row[jj] = speed[base + (row0 + i) * sa + (col0 + jj) * sb]
         for j in range(n):
             norm[q, j] = 0
     for j in range(n):
@@ -308,6 +330,7 @@ def _stencil(v, base, n, k, idx, shape, w, sign, ghosts):
 def stage(
     first,
     stop,
+    blocks,
     v,
     u0,
     out,
@@ -345,10 +368,12 @@ def stage(
     tstar,
     tgrad,
 ):
-    """One Runge-Kutta stage in Shu-Osher form on planes ``first`` to
-    ``stop - 1`` of padded arrays: ``out = a u0 + b (v + dt L(v))`` with
-    ``L`` the Lax-Friedrichs numerical Hamiltonian of backward time, ghosts
-    of ``out`` refreshed. The last stage of a step (``final``) also keeps
+    """One Runge-Kutta stage in Shu-Osher form on blocks ``first`` to
+    ``stop - 1`` of ``blocks`` (``_block_layout``) of padded arrays:
+    ``out = a u0 + b (v + dt L(v))`` with ``L`` the Lax-Friedrichs
+    numerical Hamiltonian of backward time, ghosts of ``out`` refreshed on
+    every plane once its last block is done (a thread's blocks end at a
+    plane's end). The last stage of a step (``final``) also keeps
     ``out <= u0`` if ``monotone``, applies the reach-avoid clamp
     ``max(min(out, target), -avoid)`` and, if
     ``record``, stamps T* and the gradient (unpadded arrays) on nodes
@@ -369,18 +394,25 @@ def stage(
     norm = np.empty((nplayers, n), v.dtype)
     p = np.empty(ndim)
     cu, cd = np.empty(m), np.empty(q)
-    for pi in range(first, stop):
+    for bi in range(first, stop):
+        pi, row0, rows, col0, cols = blocks[bi, 0], blocks[bi, 1], blocks[bi, 2], blocks[bi, 3], blocks[bi, 4]
         start = pi * (na + 6) * W
-        base = start + 3 * W
+        base, n, stride, off = _block_layout(start, row0, rows, col0, cols, nb)
+        node0 = (pi * na + row0) * nb + col0
         _plane_index(pi, shape, idx)
         for k in range(ndim):
             r0, r1, r2, r3, r4, r5, r6 = _stencil(v, base, n, k, idx, shape, w, edge_sign[k], ghosts)
-            _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx[k], order, consts, pl[k], pr[k])
+            _derivatives(r0, r1, r2, r3, r4, r5, r6, inv_dx[k], order, consts, pl[k], pr[k], n)
         if kind == SIMPLE_MOTION:
-            _simple_motion_plane(
+            _simple_motion_block(
                 idx,
-                na,
-                nb,
+                row0,
+                rows,
+                col0,
+                cols,
+                stride,
+                off,
+                n,
                 pl,
                 pr,
                 consts[14],
@@ -394,8 +426,29 @@ def stage(
                 dv,
             )
         else:
-            _affine_plane(
-                pi * na * nb, na, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv
+            _affine_block(
+                node0,
+                rows,
+                cols,
+                nb,
+                stride,
+                off,
+                pl,
+                pr,
+                f0s,
+                Gs,
+                Ks,
+                alphas,
+                u_kind,
+                u_a,
+                u_b,
+                d_kind,
+                d_a,
+                d_b,
+                p,
+                cu,
+                cd,
+                dv,
             )
         centre = v[base : base + n]
         o_run = out[base : base + n]
@@ -414,20 +467,45 @@ def stage(
                 for j in range(n):
                     o_run[j] = max(o_run[j], -g_run[j])
             if record:
-                _record(o_run, u_run, pl, pr, na, nb, pi * na * nb, t_old, dt, tstar, tgrad)
-        _fill_ghosts(out, start, na, nb, edge_sign[ndim - 2], edge_sign[ndim - 1])
+                _record(o_run, u_run, pl, pr, rows, cols, nb, stride, off, node0, t_old, dt, tstar, tgrad)
+        if bi == stop - 1 or blocks[bi + 1, 0] != pi:
+            _fill_ghosts(out, start, na, nb, edge_sign[ndim - 2], edge_sign[ndim - 1])
 
 
 @njit(cache=True)
-def _record(o_run, u_run, pl, pr, na, nb, offset, t_old, dt, tstar, tgrad):
-    """T* and the central gradient of the nodes of one plane that entered
+def _block_layout(start, row0, rows, col0, cols, nb):
+    """Where a block of a plane lies in a padded array: ``(base, n, stride,
+    off)``, its run ``[base, base + n)`` and node ``(i, jj)`` of the block at
+    ``base + i * stride + off + jj``. A block of whole rows is read as one
+    run across them, ghost columns included (the long loops vectorise; the
+    ghost entries are overwritten by ``_fill_ghosts``); a block of part of
+    a row (``rows`` must then be 1) is read as exactly its nodes."""
+    W = nb + 6
+    if col0 == 0 and cols == nb:
+        return start + (3 + row0) * W, rows * W, W, 3
+    return start + (3 + row0) * W + 3 + col0, cols, cols, 0
+
+
+def plane_blocks(shape) -> np.ndarray:
+    """One block per plane, each its whole plane: the full-grid solve."""
+    na, nb = shape[-2], shape[-1]
+    planes = int(np.prod(shape[:-2]))
+    blocks = np.zeros((planes, 5), np.int64)
+    blocks[:, 0] = np.arange(planes)
+    blocks[:, 2] = na
+    blocks[:, 4] = nb
+    return blocks
+
+
+@njit(cache=True)
+def _record(o_run, u_run, pl, pr, rows, cols, nb, stride, off, node0, t_old, dt, tstar, tgrad):
+    """T* and the central gradient of the nodes of one block that entered
     the set during this step; the entry time is interpolated linearly."""
     ndim = pl.shape[0]
-    W = nb + 6
-    for i in range(na):
-        for jj in range(nb):
-            j = i * W + 3 + jj
-            node = offset + i * nb + jj
+    for i in range(rows):
+        for jj in range(cols):
+            j = i * stride + off + jj
+            node = node0 + i * nb + jj
             after = o_run[j]
             if after <= 0 and tstar[node] == np.inf:
                 before = u_run[j]
@@ -492,3 +570,114 @@ def tabulate(shape, lo, dx, dyn, u_kind, u_a, u_b, d_kind, d_a, d_b, f0s, Gs, Ks
                 Ks[flat, k, i] = K[k, i]
         best = max(best, rate)
     return best
+
+
+@njit(cache=True, nogil=True)
+def _crossing(v, a, b, n):
+    """Whether nodes ``a + j`` and ``b + j`` lie on either side of the zero
+    level for some ``j < n``; a branch-free count, so the loop vectorises."""
+    crossings = 0
+    for j in range(n):
+        crossings += (v[a + j] <= 0) != (v[b + j] <= 0)
+    return crossings > 0
+
+
+@njit(cache=True, nogil=True)
+def front_rows(first, stop, v, shape, band, rows):
+    """Mark in ``rows`` (one byte per row of the grid, ``shape[:-1]``
+    flattened) every row holding two neighbours along its own axis on
+    either side of the zero level, and both rows of every pair of
+    neighbouring rows that hold such neighbours across them; rows of
+    ``band`` (the same layout) only, where the front can be, and planes
+    ``first`` to ``stop - 1`` only, without the GIL, so that threads can
+    share the planes."""
+    ndim = shape.shape[0]
+    na, nb = shape[ndim - 2], shape[ndim - 1]
+    W = nb + 6
+    plane = (na + 6) * W
+    strides = np.empty(ndim - 1, np.int64)  # padded offset of one step along each axis but the last
+    steps = np.empty(ndim - 1, np.int64)  # row-index offset of the same step
+    strides[ndim - 2], steps[ndim - 2] = W, 1
+    s, t = plane, na
+    for k in range(ndim - 3, -1, -1):
+        strides[k], steps[k] = s, t
+        s *= shape[k]
+        t *= shape[k]
+    idx = np.zeros(ndim, np.int64)
+    for p in range(first, stop):
+        _plane_index(p, shape, idx)
+        for i in range(na):
+            idx[ndim - 2] = i
+            row = p * na + i
+            if band[row] == 0:
+                continue
+            at = p * plane + (3 + i) * W + 3
+            if _crossing(v, at, at + 1, nb - 1):
+                rows[row] = 1
+            for k in range(ndim - 1):
+                if idx[k] + 1 < shape[k] and _crossing(v, at, at + strides[k], nb):
+                    rows[row] = 1
+                    rows[row + steps[k]] = 1
+
+
+@njit(cache=True)
+def row_blocks(rows, shape):
+    """The rows marked in ``rows`` as stage blocks (``_block_layout``),
+    consecutive marked rows of a plane merged into one block so that the
+    loops run long."""
+    ndim = shape.shape[0]
+    na, nb = shape[ndim - 2], shape[ndim - 1]
+    out = np.empty((rows.shape[0], 5), np.int64)
+    n = 0
+    for p in range(rows.shape[0] // na):
+        i = 0
+        while i < na:
+            if rows[p * na + i] == 0:
+                i += 1
+                continue
+            a = i
+            while i < na and rows[p * na + i] != 0:
+                i += 1
+            out[n, 0], out[n, 1], out[n, 2], out[n, 3], out[n, 4] = p, a, i - a, 0, nb
+            n += 1
+    return out[:n].copy()
+
+
+@njit(cache=True, nogil=True)
+def copy_rows(first, stop, src, dst, rows, shape):
+    """Copy from ``src`` to ``dst`` (padded arrays) the rows marked in
+    ``rows`` (as in ``front_rows``) of planes ``first`` to ``stop - 1``,
+    each with its ghost columns, and the ghost rows beside a plane's edge
+    rows, which are made from them."""
+    ndim = shape.shape[0]
+    na, nb = shape[ndim - 2], shape[ndim - 1]
+    W = nb + 6
+    plane = (na + 6) * W
+    for p in range(first, stop):
+        for i in range(na):
+            if rows[p * na + i] == 0:
+                continue
+            lo = 0 if i == 0 else 3 + i
+            hi = na + 6 if i == na - 1 else 4 + i
+            a, b = p * plane + lo * W, p * plane + hi * W
+            dst[a:b] = src[a:b]
+
+
+@njit(cache=True, nogil=True)
+def clamp_rows(first, stop, v, avoid, has_avoid, rows, shape, cap):
+    """``v = max(min(v, cap), -avoid)`` on the rows marked in ``rows`` of
+    planes ``first`` to ``stop - 1``, over the same entries as ``copy_rows``."""
+    ndim = shape.shape[0]
+    na, nb = shape[ndim - 2], shape[ndim - 1]
+    W = nb + 6
+    plane = (na + 6) * W
+    for p in range(first, stop):
+        for i in range(na):
+            if rows[p * na + i] == 0:
+                continue
+            lo = 0 if i == 0 else 3 + i
+            hi = na + 6 if i == na - 1 else 4 + i
+            for j in range(p * plane + lo * W, p * plane + hi * W):
+                v[j] = min(v[j], cap)
+                if has_avoid:
+                    v[j] = max(v[j], -avoid[j])

@@ -86,10 +86,11 @@ def ctf10():
     return ctf_geometry(load_map("ctf-10"), N)
 
 
-@pytest.fixture(scope="module")
-def weno_all(ctf10):
-    """R_A, F_A and W_A on one grid with the accurate scheme."""
-    return solve_ctf(ctf10, RULES, "all", scheme="weno5")
+@pytest.fixture(scope="module", params=[False, True], ids=["full", "local"])
+def weno_all(ctf10, request):
+    """R_A, F_A and W_A on one grid with the accurate scheme, on the full
+    grid and by the local solve (whose sets every test here must accept)."""
+    return solve_ctf(ctf10, RULES, "all", scheme="weno5", local=request.param)
 
 
 @pytest.fixture(scope="module")
@@ -99,10 +100,10 @@ def weno_game(weno_all):
     return CtfQueries(CtfSolution(weno_all.geometry, weno_all.rules, sets))
 
 
-@pytest.fixture(scope="module")
-def first_game(ctf10):
+@pytest.fixture(scope="module", params=[False, True], ids=["full", "local"])
+def first_game(ctf10, request):
     """The two-stage game with the first-order scheme, for tests of logic."""
-    return CtfQueries(solve_ctf(ctf10, RULES, "both", scheme="first"))
+    return CtfQueries(solve_ctf(ctf10, RULES, "both", scheme="first", local=request.param))
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,7 @@
 """The HJI reach-avoid solver against sets known by inspection, by geometry
 and in closed form; monotonicity, grid edges, convergence, T*, bad input."""
 
+import itertools
 import math
 import tracemalloc
 
@@ -9,10 +10,12 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
+from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
 from bearcat.solvers.hji import PaddedField, required_bytes, solve_reach_avoid
+from tests.support.local_band import assert_local_matches_full
 
 SCHEMES = ("first", "weno5")
 # Half-width, in cells, of the band around a set boundary where the schemes
@@ -427,3 +430,144 @@ def test_a_five_dimensional_grid_grows_a_ball_at_the_runners_speed_whatever_the_
     game = SimpleMotion((Player((0, 1, 2), 1.0, "control"), Player((3, 4), 0.5, "disturbance")))
     found = solve_reach_avoid(g, game, radius - 1.5, horizon=2.0).reach_avoid_set
     assert_matches(found, radius <= 3.5, 1.0)
+
+
+def _row_pieces(shape):
+    """Blocks of parts of rows: every row of every plane cut in three."""
+    na, nb = shape[-2], shape[-1]
+    cuts = (0, nb // 3, 2 * nb // 3, nb)
+    planes = int(np.prod(shape[:-2]))
+    return np.array(
+        [(p, i, 1, a, b - a) for p in range(planes) for i in range(na) for a, b in itertools.pairwise(cuts)],
+        np.int64,
+    )
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_stage_over_parts_of_rows_computes_exactly_what_one_over_whole_planes_does(scheme, monkeypatch):
+    """The stage kernel takes blocks of nodes; cut into pieces of rows, a
+    solve (4-D simple motion with T* and its gradient, and a 2-D affine
+    one) gives the same numbers, bit for bit, as one block per plane."""
+    g = Grid.spanning((-5.0,) * 4, (5.0,) * 4, (11,) * 4)
+    xa, ya, xd, yd = np.meshgrid(*g.axes(), indexing="ij", sparse=True)
+    target = np.broadcast_to(np.minimum(STRIP - xa, STRIP - xd), g.shape)
+    avoid = np.hypot(xa - xd, ya - yd) - 1.5
+    flat = plane()
+    x, y = flat.mesh()
+
+    def solves():
+        game = solve_reach_avoid(
+            g, SimpleMotion.pursuit(1.0, 1.0), target, avoid, horizon=3.0, scheme=scheme, record_tstar=True, tol=0
+        )
+        turn = solve_reach_avoid(
+            flat, ControlAffine(rotating, control=Ball((0.0, 0.0), 1.0)), np.hypot(x - 2, y) - 0.5, horizon=1.0
+        )
+        return game.value, game.tstar, game.tstar_gradient, turn.value
+
+    whole = solves()
+    monkeypatch.setattr(kern, "plane_blocks", _row_pieces)
+    pieces = solves()
+    for a, b in zip(whole, pieces):
+        assert np.array_equal(a, b)
+
+
+# --- the local (narrow-band) solve ---
+
+
+def assert_local_matches(full, local, cell):
+    """Sets and T* as ``assert_local_matches_full`` asks, for values that
+    rise by about a cell's width per cell (distances)."""
+    assert local.local and not full.local
+    return assert_local_matches_full(full.value, local.value, full.tstar, local.tstar, full.time / full.steps, cell / 4)
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+@pytest.mark.parametrize("stage", ["capture", "return"])
+def test_the_local_solve_of_the_line_game_matches_the_full_grid(stage, scheme):
+    """Fig. 3.2's game on the (x_a, x_d) plane, whose capture strip is a
+    ridge of ``-g`` above the clamp the band would otherwise choose."""
+    g = Grid.spanning((-5.0, -5.0), (5.0, 5.0), (121, 121))
+    xa, xd = g.mesh()
+    forfeit = np.minimum(interval_distance(xd, *FLAG), xd - HOME)
+    goal = interval_distance(xa, *FLAG) if stage == "capture" else xa - HOME
+    solves = [
+        solve_reach_avoid(
+            g,
+            SimpleMotion.pursuit(1.0, 1.0, dims=1),
+            np.minimum(goal, forfeit),
+            np.abs(xa - xd) - CAPTURE,
+            horizon=15.0,
+            scheme=scheme,
+            record_tstar=True,
+            local=local,
+        )
+        for local in (False, True)
+    ]
+    assert_local_matches(*solves, g.spacing[0])
+    band = {"first": 10, "weno5": 5}[scheme]  # rows, and cells of rise
+    assert solves[1].ceiling == pytest.approx(max(band * g.spacing[0], CAPTURE), rel=1e-3)
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_local_solve_updates_only_a_band_around_a_growing_ball(scheme):
+    """Two runners of speed 1 on a 4-D grid: the set after time t is the
+    ball of radius 1 + t sqrt(2) ... reached by both at once, and the band
+    around its front is a small part of the grid, so the local solve does a
+    fraction of the full grid's work for the same set and T*."""
+    g = Grid.spanning((-6.0,) * 4, (6.0,) * 4, (33,) * 4)
+    radius = np.sqrt(sum(x**2 for x in g.mesh()))
+    game = SimpleMotion((Player((0, 1), 1.0, "control"), Player((2, 3), 1.0, "control")))
+    full, local = (
+        solve_reach_avoid(g, game, radius - 1.0, horizon=1.0, scheme=scheme, record_tstar=True, tol=0, local=local)
+        for local in (False, True)
+    )
+    cell = g.spacing[0]
+    assert_local_matches(full, local, cell)
+    assert full.node_updates == g.size * full.steps
+    assert local.node_updates < {"first": 0.7, "weno5": 0.35}[scheme] * full.node_updates  # a wider band
+    # Above the set the value is the full grid's up to the ceiling, a few
+    # cells of rise out, and the ceiling beyond: the far corners hold it.
+    assert 2 * cell < local.ceiling <= {"first": 10, "weno5": 5}[scheme] * cell
+    below = full.value < local.ceiling - cell
+    assert np.abs(local.value - full.value)[below & (full.value > 0)].max() < 0.1 * cell
+    assert local.value.max() == pytest.approx(local.ceiling)
+    assert local.value[0, 0, 0, 0] == pytest.approx(local.ceiling) and full.value[0, 0, 0, 0] > 3 * local.ceiling
+
+
+@pytest.mark.parametrize("scheme", SCHEMES)
+def test_a_long_local_solve_keeps_pace_with_the_full_grid(scheme):
+    """The open-square flag return of ``benchmarks/hji.py`` over 20 s on
+    21^4: the front crosses the square twice over, through values the band
+    reached long after the solve began. Left unclamped, those stood as far
+    above the full grid's as the front had come, and T* lagged by 3 steps
+    (first order) to 66 (WENO5)."""
+    g = Grid.spanning((-5.0,) * 4, (5.0,) * 4, (21,) * 4)
+    xa, ya, xd, yd = g.mesh()
+    target, avoid = np.minimum(4.0 - xa, 4.0 - xd), np.hypot(xa - xd, ya - yd) - 0.5
+    full, local = (
+        solve_reach_avoid(
+            g,
+            SimpleMotion.pursuit(1.0, 1.0),
+            target,
+            avoid,
+            horizon=20.0,
+            scheme=scheme,
+            record_tstar=True,
+            tol=0,
+            local=local,
+        )
+        for local in (False, True)
+    )
+    assert_local_matches(full, local, g.spacing[0])
+
+
+def test_a_local_solve_without_a_front_updates_nothing_and_agrees():
+    """A target off the grid leaves no zero level to follow: the set stays
+    empty on the full grid too, and the local solve does no work."""
+    g = plane()
+    x, y = g.mesh()
+    full, local = (
+        solve_reach_avoid(g, runner(), np.hypot(x - 50, y) - 1, horizon=1.0, local=local) for local in (False, True)
+    )
+    assert not full.reach_avoid_set.any() and not local.reach_avoid_set.any()
+    assert local.node_updates == 0 < full.node_updates

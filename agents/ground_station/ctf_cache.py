@@ -131,6 +131,7 @@ class CtfGame:
     scheme: str = "weno5"
     tol: float = DEFAULT_TOL
     dtype: str = "float32"
+    local: bool = False
 
     def set_key(self, name: str) -> str:
         """The cache key of set ``name`` (``return``, ``capture`` or ``win``)."""
@@ -149,6 +150,8 @@ class CtfGame:
             "dtype": self.dtype,
             "after": self.set_key("return") if name == "win" else None,
         }
+        if self.local:  # full-grid keys stay as they were
+            inputs["local"] = True
         return hashlib.sha256(json.dumps(inputs, sort_keys=True).encode()).hexdigest()[:32]
 
 
@@ -283,6 +286,7 @@ def _solution(game: CtfGame, stages: str, geometry, known: dict, progress: Progr
         tol=game.tol,
         known=known,
         progress=progress,
+        local=game.local,
     )
 
 

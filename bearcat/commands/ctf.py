@@ -110,6 +110,12 @@ def register_solve(games) -> None:
         "(thesis 3.3) on a map and cache them on disk.",
     )
     add_game_options(parser)
+    parser.add_argument(
+        "--local",
+        action="store_true",
+        help="update only a narrow band around the moving front: the same sets and time-to-win, values away "
+        "from the front not those of the full grid (see the README's performance section)",
+    )
     add_json_option(parser, "a summary")
     parser.set_defaults(run=run_solve)
 
@@ -209,7 +215,8 @@ def game_from_args(args) -> CtfGame:
             f"--grid {args.grid} is too coarse for a capture radius of {rules.capture_radius:g} m: its cells on "
             f"map {game_map.name} are {coarse[0]:.2f} m; use --grid {coarse[1]} or more, or a larger --capture-radius"
         )
-    return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol)
+    local = getattr(args, "local", False)  # only `solve ctf` offers it: guidance reads values off the front
+    return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol, local=local)
 
 
 def solve_game(args) -> tuple[CtfGame, Solved, float]:
@@ -244,6 +251,7 @@ def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
                 "converged_at_s": found.converged_at,
                 "horizon_s": game.rules.return_time if name == "return" else game.rules.capture_time,
                 "steps": found.steps,
+                "node_updates": found.node_updates,
                 "source": solved.sources[name],
                 "file": str(solved.paths[name]) if name in solved.paths else None,
             }
@@ -256,7 +264,8 @@ def run_solve(args) -> int:
     game, solved, seconds = solve_game(args)
     rules, n = game.rules, game.grid_points
     out.say(
-        f"capture-the-flag on {game.map.name}: {n}^4 = {n**4:,} joint states, {game.scheme}, "
+        f"capture-the-flag on {game.map.name}: {n}^4 = {n**4:,} joint states, {game.scheme}"
+        f"{' (local band)' if game.local else ''}, "
         f"speeds {rules.attacker_speed:g}/{rules.defender_speed:g} m/s, capture radius {rules.capture_radius:g} m"
     )
     rows = set_summary(game, solved)
@@ -264,7 +273,10 @@ def run_solve(args) -> int:
         if row["source"] == "cache":
             how = "loaded from cache"
         elif row["converged"]:
-            how = f"converged at {row['converged_at_s']:.1f} s of game time, {row['steps']} steps"
+            how = (
+                f"converged at {row['converged_at_s']:.1f} s of game time, {row['steps']} steps, "
+                f"{row['node_updates']:,} node updates"
+            )
         else:
             how = (
                 f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
@@ -279,6 +291,7 @@ def run_solve(args) -> int:
             "map": game.map.name,
             "grid": n,
             "scheme": game.scheme,
+            "local": game.local,
             "rules": asdict(rules),
             "sets": rows,
             "seconds": round(seconds, 3),
