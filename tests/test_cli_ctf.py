@@ -43,6 +43,25 @@ def test_solve_reports_each_set_and_a_second_call_loads_it(cache, tmp_path):
     assert "loaded from cache" in run.stdout
 
 
+def test_a_local_solve_is_cached_apart_and_reports_its_node_updates(cache, tmp_path):
+    """``--local`` solves the same game by the narrow band: its own cache
+    entries (the full grid's stay loaded), the same winners up to the
+    boundary, fewer node updates than the full grid's steps times nodes."""
+    reports = {}
+    for flags in ((), ("--local",)):
+        out = tmp_path / f"solve{len(flags)}.json"
+        run = bearcat("solve", "ctf", *GAME, "--stages", "all", *flags, "--json", str(out), cache=cache)
+        assert run.returncode == 0, run.stderr
+        reports[bool(flags)] = json.loads(out.read_text())
+    full, local = ({row["set"]: row for row in reports[k]["sets"]} for k in (False, True))
+    assert reports[True]["local"] and not reports[False]["local"]
+    assert all(row["source"] == "cache" for row in full.values())
+    assert all(row["source"] == "solved" for row in local.values())
+    for name, row in local.items():
+        assert 0 < row["node_updates"] <= row["steps"] * 17**4
+        assert row["attacker_wins_fraction"] == pytest.approx(full[name]["attacker_wins_fraction"], abs=0.01)
+
+
 def test_solve_shows_progress_for_a_set_it_solves(tmp_path):
     run = bearcat("solve", "ctf", *GAME, "--stages", "return", cache=tmp_path)
     assert run.returncode == 0, run.stderr

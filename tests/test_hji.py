@@ -525,13 +525,14 @@ def test_a_local_solve_updates_only_a_band_around_a_growing_ball(scheme):
     assert_local_matches(full, local, cell)
     assert full.node_updates == g.size * full.steps
     assert local.node_updates < {"first": 0.7, "weno5": 0.35}[scheme] * full.node_updates  # a wider band
-    # Above the set the value is the full grid's up to the ceiling, a few
-    # cells of rise out, and the ceiling beyond: the far corners hold it.
+    # Above the set the value is the full grid's near the front, the
+    # ceiling a few cells of rise out, and the ceiling beyond: the far
+    # corners hold it.
     assert 2 * cell < local.ceiling <= {"first": 10, "weno5": 5}[scheme] * cell
-    below = full.value < local.ceiling - cell
-    assert np.abs(local.value - full.value)[below & (full.value > 0)].max() < 0.1 * cell
+    near = (full.value > 0) & (full.value < local.ceiling / 2)
+    assert np.abs(local.value - full.value)[near].max() < 0.05 * cell
     assert local.value.max() == pytest.approx(local.ceiling)
-    assert local.value[0, 0, 0, 0] == pytest.approx(local.ceiling) and full.value[0, 0, 0, 0] > 3 * local.ceiling
+    assert local.value[0, 0, 0, 0] == pytest.approx(local.ceiling) and full.value[0, 0, 0, 0] > 2 * local.ceiling
 
 
 @pytest.mark.parametrize("scheme", SCHEMES)

@@ -113,8 +113,8 @@ def register_solve(games) -> None:
     parser.add_argument(
         "--local",
         action="store_true",
-        help="update only a narrow band around the moving front: the same sets and time-to-win, values away "
-        "from the front not those of the full grid (see the README's performance section)",
+        help="update only a narrow band around the front: the same sets and time-to-win, with the defender's "
+        "margins clamped a few cells out (see the README's benchmarks)",
     )
     add_json_option(parser, "a summary")
     parser.set_defaults(run=run_solve)
@@ -215,7 +215,7 @@ def game_from_args(args) -> CtfGame:
             f"--grid {args.grid} is too coarse for a capture radius of {rules.capture_radius:g} m: its cells on "
             f"map {game_map.name} are {coarse[0]:.2f} m; use --grid {coarse[1]} or more, or a larger --capture-radius"
         )
-    local = getattr(args, "local", False)  # only `solve ctf` offers it: guidance reads values off the front
+    local = getattr(args, "local", False)  # only `solve ctf` offers it: guidance shows the full grid's margins
     return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol, local=local)
 
 
