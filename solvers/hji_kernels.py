@@ -17,9 +17,9 @@ scratch exists besides the value buffers. Neighbour planes along the outer
 axes are read in place; only planes beyond the grid edge are made up.
 
 The stage kernel works on blocks (``_block_layout``): whole planes for the
-full-grid solve, or pieces of single rows, so that a solve can update only
-the nodes that need it (the narrow band around the front) with the same
-arithmetic node for node.
+full-grid solve, runs of whole rows for the local one (the narrow band
+around the front, ``front_rows``, ``row_blocks``), or pieces of single
+rows, all with the same arithmetic node for node.
 """
 
 from __future__ import annotations
@@ -661,23 +661,3 @@ def copy_rows(first, stop, src, dst, rows, shape):
             hi = na + 6 if i == na - 1 else 4 + i
             a, b = p * plane + lo * W, p * plane + hi * W
             dst[a:b] = src[a:b]
-
-
-@njit(cache=True, nogil=True)
-def clamp_rows(first, stop, v, avoid, has_avoid, rows, shape, cap):
-    """``v = max(min(v, cap), -avoid)`` on the rows marked in ``rows`` of
-    planes ``first`` to ``stop - 1``, over the same entries as ``copy_rows``."""
-    ndim = shape.shape[0]
-    na, nb = shape[ndim - 2], shape[ndim - 1]
-    W = nb + 6
-    plane = (na + 6) * W
-    for p in range(first, stop):
-        for i in range(na):
-            if rows[p * na + i] == 0:
-                continue
-            lo = 0 if i == 0 else 3 + i
-            hi = na + 6 if i == na - 1 else 4 + i
-            for j in range(p * plane + lo * W, p * plane + hi * W):
-                v[j] = min(v[j], cap)
-                if has_avoid:
-                    v[j] = max(v[j], -avoid[j])
