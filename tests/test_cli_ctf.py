@@ -59,6 +59,7 @@ def test_a_local_solve_is_cached_apart_and_reports_its_node_updates(cache, tmp_p
     assert all(row["source"] == "solved" for row in local.values())
     for name, row in local.items():
         assert 0 < row["node_updates"] <= row["steps"] * 17**4
+        assert full[name]["margin_ceiling_m"] is None and 0 < row["margin_ceiling_m"] < 10
         assert row["attacker_wins_fraction"] == pytest.approx(full[name]["attacker_wins_fraction"], abs=0.01)
 
 

@@ -252,6 +252,8 @@ def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
                 "horizon_s": game.rules.return_time if name == "return" else game.rules.capture_time,
                 "steps": found.steps,
                 "node_updates": found.node_updates,
+                # A local solve's margins stop at its ceiling, the value's largest.
+                "margin_ceiling_m": round(float(found.value.max()), 3) if game.local else None,
                 "source": solved.sources[name],
                 "file": str(solved.paths[name]) if name in solved.paths else None,
             }
@@ -282,6 +284,8 @@ def run_solve(args) -> int:
                 f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
                 f"{row['horizon_s']:g} s game; longer stage times approach the unlimited one"
             )
+        if row["margin_ceiling_m"] is not None:
+            how += f"; defender margins clamped at {row['margin_ceiling_m']:g} m"
         out.say(
             f"{row['set']}: attacker wins from {100 * row['attacker_wins_fraction']:.1f}% of free joint states; {how}"
         )
