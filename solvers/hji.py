@@ -80,11 +80,10 @@ class _Scheme:
     band: int  # rows of a local solve's band each side of the front (see _NarrowBand)
 
 
-# The band holds the WENO5 stencil's three cells and two more: at none more,
-# T* strayed by tens of steps where the value is nearly flat. First order
-# reads one cell but diffuses more: the clamp's edge (``_NarrowBand``) must
-# lie farther out, and with 8 rows T* on the line game of Fig. 3.2 was up to
-# 1.8 steps late, with 10 within a step.
+# The band holds the WENO5 stencil's three cells and two more for the
+# front's motion. First order reads one cell but diffuses more: the clamp's
+# edge (``_NarrowBand``) must lie farther out, and with 8 rows T* on the line
+# game of Fig. 3.2 was up to 1.8 steps late, with 10 within a step.
 SCHEMES = {"weno5": _Scheme(5, 3, 3, 5), "first": _Scheme(1, 1, 2, 10)}
 
 # (a, b) of each stage out = a * u0 + b * (v + dt L(v)) (Shu & Osher 1988).
