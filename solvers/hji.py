@@ -343,20 +343,22 @@ class _Stepper:
         )
         self.tstar, self.tgrad = tstar, tgrad
         self.threads = max(1, numba.get_num_threads())
+        self.row_length = grid.shape[-1]
         self.use(kern.plane_blocks(grid.shape))
 
     def use(self, blocks: np.ndarray) -> None:
-        """Update the nodes of ``blocks`` from now on, split between the
-        threads in ranges of about equal node counts that end at a plane's
+        """Update the rows of ``blocks`` from now on, split between the
+        threads in ranges of about equal row counts that end at a plane's
         end (the kernel refreshes a plane's ghosts after its last block)."""
         self.blocks = blocks
-        self.nodes = int(np.dot(blocks[:, 2], blocks[:, 4]))
+        rows = int(blocks[:, 2].sum())
+        self.nodes = rows * self.row_length
         if len(blocks) == 0:  # a set that is empty or fills the grid has no front
             self.ranges = [(0, 0)]
             return
         ends = np.flatnonzero(np.diff(blocks[:, 0], append=-1)) + 1  # block index after each plane
-        done = np.cumsum(blocks[:, 2] * blocks[:, 4])[ends - 1]  # nodes up to each plane's end
-        cuts = ends[np.searchsorted(done, self.nodes * np.arange(1, self.threads) / self.threads)]
+        done = np.cumsum(blocks[:, 2])[ends - 1]  # rows up to each plane's end
+        cuts = ends[np.searchsorted(done, rows * np.arange(1, self.threads) / self.threads)]
         bounds = sorted({0, *(int(c) for c in cuts), len(blocks)})
         self.ranges = list(itertools.pairwise(bounds))
 

@@ -16,10 +16,10 @@ afterwards), so the loops are long and vectorise, and only plane-sized
 scratch exists besides the value buffers. Neighbour planes along the outer
 axes are read in place; only planes beyond the grid edge are made up.
 
-The stage kernel works on blocks (``_block_layout``): whole planes for the
-full-grid solve, runs of whole rows for the local one (the narrow band
-around the front, ``front_rows``, ``row_blocks``), or pieces of single
-rows, all with the same arithmetic node for node.
+The stage kernel works on blocks of whole rows (``_block_layout``): whole
+planes for the full-grid solve, runs of rows for the local one (the narrow
+band around the front, ``front_rows``, ``row_blocks``), with the same
+arithmetic node for node.
 """
 
 from __future__ import annotations
@@ -208,16 +208,15 @@ def fill_ghosts(arr, shape, edge_sign):
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
-def _affine_block(
-    node0, rows, cols, nb, stride, off, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv
-):
+def _affine_block(node0, rows, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv):
     """Lax-Friedrichs Hamiltonian of control-affine dynamics over a block
     (``_block_layout``) whose first node is ``node0``, from the tabulated
     ``f0``, ``G``, ``K`` and dissipation coefficients (``tabulate``)."""
     ndim = f0s.shape[1]
+    W = nb + 6
     for i in range(rows):
-        for jj in range(cols):
-            j = i * stride + off + jj
+        for jj in range(nb):
+            j = i * W + 3 + jj
             node = node0 + i * nb + jj
             h = 0.0
             diss = 0.0
@@ -244,10 +243,7 @@ def _simple_motion_block(
     idx,
     row0,
     rows,
-    col0,
-    cols,
-    stride,
-    off,
+    nb,
     n,
     pl,
     pr,
@@ -272,9 +268,9 @@ def _simple_motion_block(
             base += idx[k] * speed_stride[q, k]
         sa, sb = speed_stride[q, ka], speed_stride[q, kb]
         for i in range(rows):
-            row = spd[q, i * stride + off : i * stride + off + cols]
-            for jj in range(cols):
-                row[jj] = speed[base + (row0 + i) * sa + (col0 + jj) * sb]
+            row = spd[q, i * (nb + 6) + 3 : i * (nb + 6) + 3 + nb]
+            for jj in range(nb):
+                row[jj] = speed[base + (row0 + i) * sa + jj * sb]
         for j in range(n):
             norm[q, j] = 0
     for j in range(n):
@@ -395,10 +391,10 @@ def stage(
     p = np.empty(ndim)
     cu, cd = np.empty(m), np.empty(q)
     for bi in range(first, stop):
-        pi, row0, rows, col0, cols = blocks[bi, 0], blocks[bi, 1], blocks[bi, 2], blocks[bi, 3], blocks[bi, 4]
+        pi, row0, rows = blocks[bi, 0], blocks[bi, 1], blocks[bi, 2]
         start = pi * (na + 6) * W
-        base, n, stride, off = _block_layout(start, row0, rows, col0, cols, nb)
-        node0 = (pi * na + row0) * nb + col0
+        base, n = _block_layout(start, row0, rows, nb)
+        node0 = (pi * na + row0) * nb
         _plane_index(pi, shape, idx)
         for k in range(ndim):
             r0, r1, r2, r3, r4, r5, r6 = _stencil(v, base, n, k, idx, shape, w, edge_sign[k], ghosts)
@@ -408,10 +404,7 @@ def stage(
                 idx,
                 row0,
                 rows,
-                col0,
-                cols,
-                stride,
-                off,
+                nb,
                 n,
                 pl,
                 pr,
@@ -429,10 +422,7 @@ def stage(
             _affine_block(
                 node0,
                 rows,
-                cols,
                 nb,
-                stride,
-                off,
                 pl,
                 pr,
                 f0s,
@@ -467,44 +457,42 @@ def stage(
                 for j in range(n):
                     o_run[j] = max(o_run[j], -g_run[j])
             if record:
-                _record(o_run, u_run, pl, pr, rows, cols, nb, stride, off, node0, t_old, dt, tstar, tgrad)
+                _record(o_run, u_run, pl, pr, rows, nb, node0, t_old, dt, tstar, tgrad)
         if bi == stop - 1 or blocks[bi + 1, 0] != pi:
             _fill_ghosts(out, start, na, nb, edge_sign[ndim - 2], edge_sign[ndim - 1])
 
 
 @njit(cache=True)
-def _block_layout(start, row0, rows, col0, cols, nb):
-    """Where a block of a plane lies in a padded array: ``(base, n, stride,
-    off)``, its run ``[base, base + n)`` and node ``(i, jj)`` of the block at
-    ``base + i * stride + off + jj``. A block of whole rows is read as one
-    run across them, ghost columns included (the long loops vectorise; the
-    ghost entries are overwritten by ``_fill_ghosts``); a block of part of
-    a row (``rows`` must then be 1) is read as exactly its nodes."""
+def _block_layout(start, row0, rows, nb):
+    """Where rows ``row0`` to ``row0 + rows - 1`` of the plane at ``start``
+    lie in a padded array: ``(base, n)``, their run ``[base, base + n)``,
+    node ``(i, jj)`` of the block at ``base + i * (nb + 6) + 3 + jj``. The
+    block is read as one run across its rows, ghost columns included: the
+    long loops vectorise, and ``_fill_ghosts`` overwrites the ghost
+    entries."""
     W = nb + 6
-    if col0 == 0 and cols == nb:
-        return start + (3 + row0) * W, rows * W, W, 3
-    return start + (3 + row0) * W + 3 + col0, cols, cols, 0
+    return start + (3 + row0) * W, rows * W
 
 
 def plane_blocks(shape) -> np.ndarray:
     """One block per plane, each its whole plane: the full-grid solve."""
-    na, nb = shape[-2], shape[-1]
+    na = shape[-2]
     planes = int(np.prod(shape[:-2]))
-    blocks = np.zeros((planes, 5), np.int64)
+    blocks = np.zeros((planes, 3), np.int64)
     blocks[:, 0] = np.arange(planes)
     blocks[:, 2] = na
-    blocks[:, 4] = nb
     return blocks
 
 
 @njit(cache=True)
-def _record(o_run, u_run, pl, pr, rows, cols, nb, stride, off, node0, t_old, dt, tstar, tgrad):
+def _record(o_run, u_run, pl, pr, rows, nb, node0, t_old, dt, tstar, tgrad):
     """T* and the central gradient of the nodes of one block that entered
     the set during this step; the entry time is interpolated linearly."""
     ndim = pl.shape[0]
+    W = nb + 6
     for i in range(rows):
-        for jj in range(cols):
-            j = i * stride + off + jj
+        for jj in range(nb):
+            j = i * W + 3 + jj
             node = node0 + i * nb + jj
             after = o_run[j]
             if after <= 0 and tstar[node] == np.inf:
@@ -625,9 +613,8 @@ def row_blocks(rows, shape):
     """The rows marked in ``rows`` as stage blocks (``_block_layout``),
     consecutive marked rows of a plane merged into one block so that the
     loops run long."""
-    ndim = shape.shape[0]
-    na, nb = shape[ndim - 2], shape[ndim - 1]
-    out = np.empty((rows.shape[0], 5), np.int64)
+    na = shape[shape.shape[0] - 2]
+    out = np.empty((rows.shape[0], 3), np.int64)
     n = 0
     for p in range(rows.shape[0] // na):
         i = 0
@@ -638,7 +625,7 @@ def row_blocks(rows, shape):
             a = i
             while i < na and rows[p * na + i] != 0:
                 i += 1
-            out[n, 0], out[n, 1], out[n, 2], out[n, 3], out[n, 4] = p, a, i - a, 0, nb
+            out[n, 0], out[n, 1], out[n, 2] = p, a, i - a
             n += 1
     return out[:n].copy()
 
