@@ -39,6 +39,7 @@ import shapely
 
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
+from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER
 from bearcat.scenarios.run_directory import SCENARIO
 
 KILL_SEEN = 2.0  # s: a killed peer's TCP connection closes at once
@@ -269,7 +270,7 @@ def _detection(run: Run) -> Finding:
         if on_shim:
             said.append(f"{kind} on the shim: its messages were cut, but no session could notice")
         elif kind in ("pause", "outage", "partition") and lasted is not None and lasted >= lease:
-            watched = [p for p in peers if p != "gs"] or peers
+            watched = [p for p in peers if p != GROUND] or peers
             seen = _first(run, watched[0], "gone", t)
             if seen is None or seen - t > lease + SLACK:
                 broken.append(f"{kind} {watched[0]} at {t:.1f} s not seen gone within the lease ({lease:g} s)")
@@ -277,7 +278,7 @@ def _detection(run: Run) -> Finding:
                 said.append(f"{kind} {watched[0]} seen gone after {seen - t:.1f} s (lease {lease:g} s)")
         end = run.ended.get(fault["fault"])
         if kind in ("pause", "outage", "partition", "restart") and end is not None and peers:
-            watched = [p for p in peers if p != "gs"] or peers
+            watched = [p for p in peers if p != GROUND] or peers
             game_over = _game_end(run)
             gone = _first(run, watched[0], "gone", t)
             was_gone = gone is not None and gone <= end + SLACK
@@ -364,7 +365,7 @@ def detected_after(directory: str | Path | Run) -> dict[int, float]:
     lease = run.scenario.lease if run.scenario is not None else 10.0
     found = {}
     for fault in run.faults:
-        peers = [p for p in fault.get("peers", []) if p != "gs"] or fault.get("peers", [])
+        peers = [p for p in fault.get("peers", []) if p != GROUND] or fault.get("peers", [])
         if fault["kind"] in DETECTABLE and peers:
             seen = _first(run, peers[0], "gone", fault["t"])
             until = min(run.ended.get(fault["fault"], math.inf), fault["t"] + lease) + SLACK
@@ -393,8 +394,7 @@ def _agent_of(key: str) -> str | None:
 def _cut_off(run: Run, t: float, *peers: str) -> bool:
     """Whether a fault had one of ``peers`` (agent names) cut off at ``t``."""
     lease = run.scenario.lease if run.scenario is not None else 10.0
-    ground = ("gs", "referee", "uav-tasking", "launcher")
-    names = {("gs" if p in ground else p) for p in peers}
+    names = {(GROUND if p in (*GROUND_AGENTS, LAUNCHER) else p) for p in peers}
     for fault in run.faults:
         start, end = fault["t"], run.ended.get(fault["fault"], math.inf)
         hit = names & set(fault.get("peers", [])) or fault["kind"] == "partition"
@@ -411,10 +411,9 @@ def _lasted(run: Run, fault: dict) -> float | None:
 
 def _first(run: Run, peer: str, what: str, after: float) -> float | None:
     """When the launcher's side first saw a token of ``peer`` come (``alive``) or go, from ``after`` on."""
-    ground = ("referee", "gs", "uav-tasking")
     for e in run.seen:
         agent = _agent_of(e["key"])
-        owner = "gs" if agent in ground else agent
+        owner = GROUND if agent in GROUND_AGENTS else agent
         if e["event"] == what and owner == peer and e["t"] >= after - 1e-9:
             return e["t"]
     return None
@@ -441,7 +440,7 @@ def _game_end(run: Run) -> float | None:
 
 def _first_ground_loss(run: Run, uav: str) -> float | None:
     for fault in run.faults:
-        if "gs" in fault.get("peers", []) and fault["kind"] in ("kill", "stop", "restart", "pause", "partition"):
+        if GROUND in fault.get("peers", []) and fault["kind"] in ("kill", "stop", "restart", "pause", "partition"):
             return fault["t"]
         if uav in fault.get("peers", []) and fault["kind"] in ("partition", "outage"):
             return fault["t"]

@@ -17,8 +17,7 @@ from pathlib import Path
 
 from bearcat.bus.errors import BusError
 from bearcat.bus.identity import AUTHORITY, add_members, make_authority, members_of
-from bearcat.scenarios.fault_effects import LAUNCHER
-from bearcat.scenarios.faults import GROUND
+from bearcat.scenarios.faults import GROUND, LAUNCHER
 from bearcat.scenarios.schema import Scenario
 
 

@@ -12,9 +12,8 @@ from __future__ import annotations
 from collections.abc import Callable
 
 from bearcat.netem.profiles import load_profile
-from bearcat.scenarios.faults import GROUND, Clock, Degrade, Fault, Gps, Heal, Outage, Partition
+from bearcat.scenarios.faults import GROUND, LAUNCHER, Clock, Degrade, Fault, Gps, Heal, Outage, Partition
 
-LAUNCHER = "launcher"
 NETWORK_KINDS = ("partition", "outage", "heal", "degrade")
 
 

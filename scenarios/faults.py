@@ -47,6 +47,10 @@ from bearcat.netem.profiles import load_profiles
 
 GROUND = "gs"
 """The ground station's peer name (referee, guidance and UAV tasking run in it)."""
+GROUND_AGENTS = (GROUND, "referee", "uav-tasking")
+"""The agents the ground station's process holds: the guidance service, the referee and the UAV tasking."""
+LAUNCHER = "launcher"
+"""The launcher's peer name: it sits on the ground station's side of every cut."""
 
 GameTime = Annotated[float, Meta(ge=0.0, le=86400.0, extra={"unit": "s"})]
 Lasting = Annotated[float, Meta(gt=0.0, le=86400.0, extra={"unit": "s"})]

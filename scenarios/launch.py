@@ -55,8 +55,7 @@ from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.scenarios.credentials import covering, members, run_authority
 from bearcat.scenarios.dispatch import FAILED
-from bearcat.scenarios.fault_effects import LAUNCHER
-from bearcat.scenarios.faults import GROUND, FaultError, refusal, write_faults
+from bearcat.scenarios.faults import GROUND, LAUNCHER, FaultError, refusal, write_faults
 from bearcat.scenarios.live_faults import LiveFaults
 from bearcat.scenarios.peers import KernelPeers, LocalPeers
 from bearcat.scenarios.run_directory import write_scenario
@@ -285,7 +284,7 @@ def _play(
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
         where = {"endpoint": endpoint, "game": scenario.name, "certs": str(certs), "network": places.host_side()}
         (out / "endpoint.json").write_text(json.dumps(where) + "\n")
-        inbox = Inbox("launcher")
+        inbox = Inbox(LAUNCHER)
         budget = SenderBudget()
         final: dict = {}
         alive: set[str] = set()

@@ -42,8 +42,8 @@ from bearcat.bus.handoff import Handoff
 from bearcat.bus.messages import Control, FaultNotice, GameState
 from bearcat.netem.shim import Shim
 from bearcat.scenarios.dispatch import Dispatcher
-from bearcat.scenarios.fault_effects import LAUNCHER, NETWORK_KINDS, apply_network, lie, skewed
-from bearcat.scenarios.faults import Clock, Gps
+from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, skewed
+from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
 from bearcat.solvers.ctf_queries import CtfQueries
 
 log = logging.getLogger(__name__)
@@ -172,7 +172,7 @@ async def run_peer(
 
     if lease is not None and all(agent.role in ("walker", "phone") for agent in agents):
         session.subscribe_liveliness(
-            keys.alive(game, "ground-station", GROUND_PEERS[0]), lambda k, alive: soon(ground, k, alive)
+            keys.alive(game, "ground-station", GROUND), lambda k, alive: soon(ground, k, alive)
         )
 
     async def ticker(agent):
@@ -397,7 +397,7 @@ def start_peer(
             dead_zones=zones,
             where=positions.get if zones is not None else None,
             record=record.impaired,
-            colocated=GROUND_PEERS,
+            colocated=(*GROUND_AGENTS, LAUNCHER),
             epoch=None,
             transport=transport,
             lease=scenario.lease,
@@ -515,9 +515,6 @@ async def _fly(autopilot, peer) -> str:
         return await peer
     finally:
         await autopilot.close()
-
-
-GROUND_PEERS = ("gs", "referee", "launcher")
 
 
 def fetch_scenario(

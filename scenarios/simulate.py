@@ -31,13 +31,12 @@ from bearcat.netem.profiles import load_profile
 from bearcat.netem.shim import Shim
 from bearcat.scenarios.cast import Cast, build_cast
 from bearcat.scenarios.dispatch import Dispatcher
-from bearcat.scenarios.faults import GROUND, FaultError, refusal
+from bearcat.scenarios.faults import GROUND, LAUNCHER, FaultError, refusal
 from bearcat.scenarios.schema import Scenario
 from bearcat.scenarios.simulated_faults import SimulatedFaults
 
 log = logging.getLogger(__name__)
 
-LAUNCHER = "launcher"
 GRACE = 5.0  # s of game time past the limit before a run that never ended is cut
 POLL = 0.1  # s between releases of messages held in dead zones
 

@@ -33,8 +33,8 @@ import zenoh
 
 from bearcat.bus import keys
 from bearcat.bus.messages import GameState
-from bearcat.scenarios.fault_effects import LAUNCHER, apply_network, lie, noted, sides, skewed
-from bearcat.scenarios.faults import GROUND, Fault
+from bearcat.scenarios.fault_effects import apply_network, lie, noted, sides, skewed
+from bearcat.scenarios.faults import GROUND, LAUNCHER, Fault
 from bearcat.scenarios.recovery import resume
 
 WATCH = 0.1  # s between looks for the events faults count from
