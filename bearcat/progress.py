@@ -3,6 +3,11 @@
 Two kinds: ``solve_bars`` for the sets a command solves (capture-the-flag
 or maneuver sets, in seconds of their horizon, one bar per set), and
 ``counting`` for a batch of games or trials.
+
+A terminal redraws a bar in place, ten times a second at most; a log file
+(stderr not a terminal, as under ``nohup`` or a batch scheduler) gets a
+redraw every ``LOGGED_EVERY`` seconds, so that an hour's solve leaves a
+few hundred lines of it, not one per solver step.
 """
 
 from __future__ import annotations
@@ -10,6 +15,12 @@ from __future__ import annotations
 import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
+
+LOGGED_EVERY = 10.0  # s between redraws when stderr is not a terminal
+
+
+def _redraw_every() -> float:
+    return 0.1 if sys.stderr.isatty() else LOGGED_EVERY
 
 
 def solve_bars(label: Callable[[str], str] | None = None, change_unit: str = "m", clock: str = "game time"):
@@ -36,11 +47,12 @@ def solve_bars(label: Callable[[str], str] | None = None, change_unit: str = "m"
                 total=round(horizon, 2),
                 desc=label(name),
                 file=sys.stderr,
+                mininterval=_redraw_every(),
                 bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s of " + clock + " "
                 "[{elapsed}<{remaining}{postfix}]",
             )
+        bar.set_postfix_str(f"change {change:.3g} {change_unit}", refresh=False)
         bar.update(round(t - bar.n, 2))
-        bar.set_postfix_str(f"change {change:.3g} {change_unit}")
         if t >= horizon - 1e-9:
             bar.close()
 
@@ -54,5 +66,5 @@ def counting(total: int, what: str, unit: str) -> Iterator[Callable[..., None]]:
     finished task (with any arguments, so it fits as a result callback)."""
     from tqdm import tqdm
 
-    with tqdm(total=total, desc=what, unit=unit, file=sys.stderr) as bar:
+    with tqdm(total=total, desc=what, unit=unit, file=sys.stderr, mininterval=_redraw_every()) as bar:
         yield lambda *_: bar.update(1)
