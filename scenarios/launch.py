@@ -13,8 +13,10 @@ supervises: the run ends when the referee says so, when a peer process dies
 run itself if the ground station is the one that died), at the time limit,
 or on Ctrl-C. In every case the launcher then stops every peer it started
 (a stop command, then SIGTERM, then SIGKILL) and leaves no process behind.
-Agents driven from a keyboard are not started here: the launcher prints the
-``bearcat peer`` command for a person to run in a terminal, and waits.
+Agents driven from a keyboard, and those a user names to join by hand
+(``joins``: a walker started in another terminal, or a phone's page served
+by a ``bearcat phone`` of the user's own), are not started here: the
+launcher prints the command to run, and waits.
 
 The launcher's own session records every message of the game it sees into
 ``events.jsonl``; each peer writes what it sent and received, what its
@@ -89,13 +91,14 @@ def free_port(kind=socket.SOCK_STREAM) -> int:
         return s.getsockname()[1]
 
 
+BEARCAT = (sys.executable, "-m", "bearcat")  # this very installation, whatever is on the PATH
+
+
 def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
     """The emulator of the scenario's UAV ``k``: system id k + 1, home where it takes off."""
     lat, lon = scenario.map.to_geodetic(*scenario.uavs[k].start)
     return [
-        sys.executable,
-        "-m",
-        "bearcat",
+        *BEARCAT,
         "vehicle",
         "--connect",
         f"udpout:127.0.0.1:{port}",
@@ -120,9 +123,7 @@ def peer_command(
     transport: str = "tcp",
 ) -> list[str]:
     return [
-        sys.executable,
-        "-m",
-        "bearcat",
+        *BEARCAT,
         "peer",
         role,
         "--scenario",
@@ -147,12 +148,25 @@ def peer_command(
 
 
 def preflight(
-    scenario: Scenario, plan: tuple, *, transport: str, secure: bool, certs: Path | None, phones: tuple[str, ...]
+    scenario: Scenario,
+    plan: tuple,
+    *,
+    transport: str,
+    secure: bool,
+    certs: Path | None,
+    phones: tuple[str, ...],
+    joins: tuple[str, ...] = (),
 ) -> None:
     """One sentence for what would make a run of ``scenario`` fail, said
     before anything is solved or started."""
     if (why := refusal(plan, "live")) is not None:
         raise FaultError(why)
+    unknown = sorted(set(joins) - set(scenario.ids))
+    if unknown:
+        raise BusError(
+            f"{scenario.source}: there is no agent {unknown[0]!r} to join by hand; the agents are "
+            f"{', '.join(scenario.ids)}"
+        )
     if secure and transport != "tcp":
         raise BusError(
             f"a --secure run carries everything over tls/, which is TCP: transport {transport!r} cannot be secured"
@@ -178,6 +192,7 @@ def launch(
     certs: Path | None = None,
     secure: bool = False,
     phones: tuple[str, ...] = (),
+    joins: tuple[str, ...] = (),
     page: tuple[str, int] = ("0.0.0.0", 8443),
     provisional: bool = False,
 ) -> LiveOutcome:
@@ -187,7 +202,8 @@ def launch(
     ``secure`` puts the router on ``tls/`` with mutual TLS and the access
     control list of ``bus.access``; the agents of ``phones`` are played from
     real phones, whose pages are served from ``page`` (host, first port) on;
-    ``transport`` is how best-effort messages travel (default: the scenario's);
+    the peers of the agents in ``joins`` are started by hand, not here (see
+    the module's docstring); ``transport`` is how best-effort messages travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim;
     ``faults`` is the fault plan to apply (default: the scenario's);
@@ -195,7 +211,7 @@ def launch(
     scenario's are not cached, and takes those up once solved."""
     plan = scenario.faults if faults is None else tuple(faults)
     transport = transport or scenario.transport
-    preflight(scenario, plan, transport=transport, secure=secure, certs=certs, phones=phones)
+    preflight(scenario, plan, transport=transport, secure=secure, certs=certs, phones=phones, joins=joins)
     full = next((f for f in plan if f.kind == "disk-full"), None)
     with SmallDisk(out, full.size) if full is not None else nullcontext() as disk:
         outcome = _play(
@@ -213,6 +229,7 @@ def launch(
             certs=certs,
             secure=secure,
             phones=phones,
+            joins=joins,
             page=page,
             provisional=provisional,
         )
@@ -242,6 +259,7 @@ def _play(
     certs,
     secure,
     phones,
+    joins,
     page,
     provisional,
 ) -> LiveOutcome:
@@ -331,7 +349,7 @@ def _play(
         session.subscribe(keys.game_wide(game), seen)
         session.subscribe_liveliness(keys.every(game, "alive"), liveliness)
 
-        keyboard = [a.id for a in scenario.agents if a.behaviour == "keyboard"]
+        by_hand = [a.id for a in scenario.agents if a.behaviour == "keyboard" or a.id in joins]
         expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
         expected |= {keys.alive(game, "phone" if a.id in phones else "walker", a.id) for a in scenario.agents}
         expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
@@ -365,8 +383,8 @@ def _play(
                 "ground-station",
                 (*(("--judge", "fixes") if phones else ()), *(("--provisional",) if provisional else ())),
             )
-            how |= {a.id: ("walker", ()) for a in scenario.agents if a.id not in keyboard and a.id not in phones}
-            pages = _pages(phones, page, out)
+            how |= {a.id: ("walker", ()) for a in scenario.agents if a.id not in by_hand and a.id not in phones}
+            pages = _pages(tuple(p for p in phones if p not in by_hand), page, out)
             how |= {name: server_how for name, (_, server_how) in pages.items()}
             for name in list(how):
                 children[name] = start(name)
@@ -380,15 +398,13 @@ def _play(
                 children[vehicle] = places.start_vehicle(
                     flyer, vehicle_command(scenario, k, port), out / "peers" / f"{vehicle}.log"
                 )
-            for name in keyboard:
-                say(
-                    f"agent {name} is driven from a keyboard; in a terminal, run:\n  "
-                    + " ".join(
-                        peer_command("walker", scenario_ref, name, endpoint, seed, netem, out, certs, transport)
-                        + (["--secure"] if secure else [])
-                    )
-                )
-            deadline = time.monotonic() + (startup if not (keyboard or phones) else 10 * startup)
+            guarded = ["--secure"] if secure else []
+            for agent in (a for a in scenario.agents if a.id in by_hand):
+                walker = peer_command("walker", scenario_ref, agent.id, endpoint, seed, netem, out, certs, transport)
+                bridge = [*BEARCAT, "phone", "--connect", endpoint, "--game", game, "--id", agent.id]
+                bridge += ["--certs", str(certs), "--out", str(out)]
+                say(_joining(agent, agent.id in phones, walker + guarded, bridge + guarded))
+            deadline = time.monotonic() + (startup if not (by_hand or phones) else 10 * startup)
             while True:
                 with lock:
                     missing = sorted(expected - alive)
@@ -446,6 +462,15 @@ def _play(
             record.note(time.time(), "outcome", **vars(outcome))
             _keep(out, outcome, record, say)
     return outcome
+
+
+def _joining(agent, phone: bool, walker: list[str], bridge: list[str]) -> str:
+    """What to tell the user who joins ``agent`` by hand: the ``bridge``
+    command that serves its phone's page, or the ``walker`` peer's."""
+    if phone:
+        return f"agent {agent.id} plays from a phone whose page you serve; in a terminal, run:\n  " + " ".join(bridge)
+    how = "is driven from a keyboard" if agent.behaviour == "keyboard" else "joins by hand"
+    return f"agent {agent.id} {how}; in a terminal, run:\n  " + " ".join(walker)
 
 
 def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[str, tuple]:

@@ -5,7 +5,9 @@ seen gone within two seconds and ends the game with that reason; garbage
 published on every key of the game is dropped and counted while the game
 goes on; an agent's exceptions are recorded and counted while its peer goes
 on; Ctrl-C stops everything; a person at a terminal steers a keyboard
-walker; a client whose router is not there says so in one sentence."""
+walker; an agent named with --joins, a walker or a phone's page bridge, is
+started by hand and waited for; a client whose router is not there says so
+in one sentence."""
 
 import asyncio
 import json
@@ -19,6 +21,7 @@ import time
 from contextlib import closing
 from pathlib import Path
 
+import aiohttp
 import pytest
 
 from bearcat.agents.ground_station.event_log import EventLog, read_events
@@ -325,6 +328,98 @@ def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_s
     finally:
         if launcher.poll() is None:
             launcher.kill()
+
+
+def _printed_command(launcher, marker: str) -> list[str]:
+    """The command the launcher printed for a peer to start by hand: the first of its lines holding ``marker``."""
+    for line in launcher.stdout:
+        if marker in line:
+            return line.split()
+    pytest.fail(f"the launcher ended without printing a command with {marker!r}")
+
+
+def test_an_agent_named_to_join_by_hand_is_waited_for_and_plays(tmp_path, env):
+    """``bearcat run --joins defender`` starts no walker for the defender:
+    it prints the command, waits for the peer, and plays with it."""
+    path = write_scenario(tmp_path, time_limit=6.0, netem="ideal")
+    out = tmp_path / "run"
+    launcher = start_launcher(path, out, "--joins", "defender")
+    person = None
+    try:
+        command = _printed_command(launcher, "bearcat peer walker")
+        assert command[command.index("--id") + 1] == "defender"
+        assert wait_for(lambda: (out / "peers" / "gs.log").exists(), 60)
+        time.sleep(3.0)
+        assert not game_started(out), "the game started without the defender"
+        joined = time.time()
+        person = subprocess.Popen(command, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, env=env)
+        output, _ = launcher.communicate(timeout=180)
+        assert person.wait(timeout=30) == 0
+    finally:
+        for p in (launcher, person):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait()
+    assert launcher.returncode == 0, output
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert outcome["ended"] and "defender" not in outcome["peers"] and "attacker" in outcome["peers"], outcome
+    events = read_events(out / "events.jsonl")
+    started = min(e["t"] for e in events if e["event"] == "sent" and e["message"].get("phase") == "running")
+    fixes = [e["t"] for e in events if e["event"] == "sent" and e["key"] == keys.fix("test-game", "defender")]
+    assert joined < started and fixes and fixes[0] > joined
+
+
+async def _page_sends_fix(url: str, fix: dict) -> None:
+    """What a phone's browser does once the page is open: connect its socket and send a fix."""
+    base, token = url.split("?")
+    async with (
+        aiohttp.ClientSession(connector=aiohttp.TCPConnector(ssl=False)) as http,
+        http.ws_connect(base + "ws?" + token) as ws,
+    ):
+        await ws.receive_json()  # the map
+        await ws.send_str(json.dumps({"type": "fix", **fix}))
+        await asyncio.sleep(1.0)
+
+
+def test_a_phone_page_served_by_hand_joins_a_launched_game(tmp_path, env):
+    """``bearcat run --phone attacker --joins attacker`` serves no page of
+    its own: it prints the ``bearcat phone`` command, whose page (here on a
+    port and with a token of the user's choosing) joins the game on the
+    phone's first fix, and the referee judges on fixes."""
+    path = write_scenario(tmp_path, time_limit=5.0, netem="ideal")
+    scenario = load_scenario(path)
+    out = tmp_path / "run"
+    (tmp_path / "token").write_text("the-attacker-s-own\n")
+    launcher = start_launcher(path, out, "--phone", "attacker", "--joins", "attacker")
+    bridge = None
+    try:
+        command = _printed_command(launcher, " phone --connect")
+        assert command[command.index("--id") + 1] == "attacker"
+        command += ["--listen", f"127.0.0.1:{free_port()}", "--token-file", str(tmp_path / "token")]
+        bridge = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)
+        url = bridge.stdout.readline().split()[1]
+        assert "the-attacker-s-own" in url, url
+        lat, lon = scenario.map.to_geodetic(25.0, 22.0)
+        deadline = time.monotonic() + 60
+        while not game_started(out):
+            assert time.monotonic() < deadline, "the game never started"
+            try:  # the page is served once the bridge has the map
+                asyncio.run(_page_sends_fix(url, {"lat": lat, "lon": lon, "accuracy": 5.0, "age": 200.0}))
+            except aiohttp.ClientConnectorError:
+                time.sleep(0.2)
+        output, _ = launcher.communicate(timeout=180)
+        bridge.wait(timeout=30)
+    finally:
+        for p in (launcher, bridge):
+            if p is not None and p.poll() is None:
+                p.kill()
+                p.wait()
+    assert launcher.returncode == 0 and "plays from a phone: open" not in output, output
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert outcome["ended"] and "attacker" not in outcome["peers"], outcome
+    events = read_events(out / "events.jsonl")
+    states = [e["message"] for e in events if e["event"] == "sent" and e["message"]["type"] == "state"]
+    assert states and all(s["judged_on"] == "fixes" for s in states)
 
 
 def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):

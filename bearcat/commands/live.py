@@ -69,6 +69,15 @@ def register(subparsers) -> None:
         "link printed, and the game waits for the phone's first fix; the referee judges on fixes",
     )
     run.add_argument(
+        "--joins",
+        action="append",
+        default=[],
+        metavar="AGENT",
+        help="AGENT's peer is started by hand, not by the launcher (repeatable): a walker in another terminal or, "
+        "with --phone AGENT, the page bridge (bearcat phone, e.g. with a certificate of your own); the launcher "
+        "prints the command and waits for it",
+    )
+    run.add_argument(
         "--page",
         type=_address,
         default=("0.0.0.0", 8443),
@@ -242,6 +251,7 @@ def run_live(args) -> int:
         secure=args.secure,
         certs=args.certs,
         phones=tuple(args.phone),
+        joins=tuple(args.joins),
     )
     out = fresh(args.out or Path("runs") / f"{scenario.name}-{seed}")
     make_directory(out, "run directory")
@@ -274,6 +284,7 @@ def run_live(args) -> int:
                 certs=args.certs,
                 secure=args.secure,
                 phones=tuple(args.phone),
+                joins=tuple(args.joins),
                 page=args.page,
                 provisional=awaited is not None,
             )
