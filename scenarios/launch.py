@@ -57,7 +57,7 @@ from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.scenarios.credentials import covering, members, run_authority
 from bearcat.scenarios.dispatch import FAILED
-from bearcat.scenarios.faults import GROUND, LAUNCHER, FaultError, refusal, write_faults
+from bearcat.scenarios.faults import GROUND, LAUNCHER, PROCESS_KINDS, FaultError, refusal, write_faults
 from bearcat.scenarios.live_faults import LiveFaults
 from bearcat.scenarios.peers import KernelPeers, LocalPeers
 from bearcat.scenarios.run_directory import write_scenario
@@ -167,6 +167,13 @@ def preflight(
             f"{scenario.source}: there is no agent {unknown[0]!r} to join by hand; the agents are "
             f"{', '.join(scenario.ids)}"
         )
+    by_hand = set(joins) | {a.id for a in scenario.agents if a.behaviour == "keyboard"}
+    for k, fault in enumerate(plan):
+        if fault.kind in PROCESS_KINDS and fault.target in by_hand:
+            raise FaultError(
+                f"fault[{k}] ({fault.kind}) targets {fault.target}, whose peer is started by hand, "
+                "not by the launcher: it has no process of the launcher's to act on"
+            )
     if secure and transport != "tcp":
         raise BusError(
             f"a --secure run carries everything over tls/, which is TCP: transport {transport!r} cannot be secured"
@@ -203,7 +210,8 @@ def launch(
     control list of ``bus.access``; the agents of ``phones`` are played from
     real phones, whose pages are served from ``page`` (host, first port) on;
     the peers of the agents in ``joins`` are started by hand, not here (see
-    the module's docstring); ``transport`` is how best-effort messages travel (default: the scenario's);
+    the module's docstring); ``transport`` is how best-effort messages
+    travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim;
     ``faults`` is the fault plan to apply (default: the scenario's);

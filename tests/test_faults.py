@@ -110,6 +110,19 @@ def test_simulate_refuses_what_it_cannot_apply_before_the_run(tmp_path, capsys):
     assert not any((tmp_path / "out").glob("seed-*/events.jsonl"))
 
 
+def test_a_run_refuses_a_process_fault_on_an_agent_joined_by_hand_before_anything_starts(tmp_path, capsys):
+    """The launcher starts no process for an agent named with --joins, so it
+    has nothing to kill: one sentence, and no run directory."""
+    path = tmp_path / "game.toml"
+    path.write_text(scenario_text())
+    plan = tmp_path / "plan.toml"
+    plan.write_text('[[fault]]\nkind = "kill"\ntarget = "defender"\nat = 3.0\n')
+    out = tmp_path / "out"
+    assert main(["run", str(path), "--faults", str(plan), "--joins", "defender", "--out", str(out)]) == 2
+    assert "fault[0] (kill) targets defender, whose peer is started by hand" in capsys.readouterr().err
+    assert not out.exists()
+
+
 # ---------------------------------------------------------------- processes
 
 
