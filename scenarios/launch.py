@@ -147,6 +147,11 @@ def peer_command(
     ]
 
 
+def started_by_hand(scenario: Scenario, joins: tuple[str, ...]) -> set[str]:
+    """The agents whose peers a person starts: those driven from a keyboard, and those named in ``joins``."""
+    return set(joins) | {a.id for a in scenario.agents if a.behaviour == "keyboard"}
+
+
 def preflight(
     scenario: Scenario,
     plan: tuple,
@@ -167,9 +172,8 @@ def preflight(
             f"{scenario.source}: there is no agent {unknown[0]!r} to join by hand; the agents are "
             f"{', '.join(scenario.ids)}"
         )
-    by_hand = set(joins) | {a.id for a in scenario.agents if a.behaviour == "keyboard"}
     for k, fault in enumerate(plan):
-        if fault.kind in PROCESS_KINDS and fault.target in by_hand:
+        if fault.kind in PROCESS_KINDS and fault.target in started_by_hand(scenario, joins):
             raise FaultError(
                 f"fault[{k}] ({fault.kind}) targets {fault.target}, whose peer is started by hand, "
                 "not by the launcher: it has no process of the launcher's to act on"
@@ -357,7 +361,7 @@ def _play(
         session.subscribe(keys.game_wide(game), seen)
         session.subscribe_liveliness(keys.every(game, "alive"), liveliness)
 
-        by_hand = [a.id for a in scenario.agents if a.behaviour == "keyboard" or a.id in joins]
+        by_hand = started_by_hand(scenario, joins)
         expected = {keys.alive(game, "referee", "referee"), keys.alive(game, "ground-station", GROUND)}
         expected |= {keys.alive(game, "phone" if a.id in phones else "walker", a.id) for a in scenario.agents}
         expected |= {keys.alive(game, "uav", u.id) for u in scenario.uavs}
