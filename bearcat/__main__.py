@@ -1,5 +1,5 @@
 import sys
 
-from bearcat.cli import main
+from bearcat.cli.main import main
 
 sys.exit(main())

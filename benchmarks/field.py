@@ -129,8 +129,8 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False, s
     from bearcat.bus.identity import Credentials, make_authority
     from bearcat.bus.zenoh_session import ZenohSession, config
     from bearcat.maps import load_map
-    from bearcat.scenarios.launch import free_port
-    from bearcat.scenarios.live import run_peer
+    from bearcat.runtime.launch import free_port
+    from bearcat.runtime.live import run_peer
 
     port = free_port()
     scheme = "tls" if secure else "tcp"
@@ -251,8 +251,8 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False, s
 
 
 def simulate_speed(games: int) -> list[dict]:
+    from bearcat.runtime.simulate import simulate
     from bearcat.scenarios.schema import load_scenario
-    from bearcat.scenarios.simulate import simulate
 
     rows = []
     for name in ("fake-out-aided-defender", "fake-out", "go-no-go"):

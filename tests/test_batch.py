@@ -8,7 +8,7 @@ import signal
 
 import pytest
 
-from bearcat.scenarios.batch import BatchInterrupted, read_results, run_batch
+from bearcat.studies.batch import BatchInterrupted, read_results, run_batch
 
 
 def square(task: dict) -> dict:

@@ -20,7 +20,7 @@ from pathlib import Path
 import pytest
 
 from bearcat.agents.ground_station.event_log import read_events
-from bearcat.scenarios.launch import free_port
+from bearcat.runtime.launch import free_port
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import start_launcher
 from tests.support.scenario_files import write_scenario

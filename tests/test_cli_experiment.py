@@ -10,7 +10,7 @@ import time
 
 import pytest
 
-from bearcat.scenarios.pursuit_experiment import PursuitSetup, run_trial, trial_tasks
+from bearcat.studies.pursuit_experiment import PursuitSetup, run_trial, trial_tasks
 
 
 def bearcat(*words, cwd=None):

@@ -11,8 +11,8 @@ import sys
 
 import pytest
 
-from bearcat.cli import COMMANDS, build_parser, main
-from bearcat.writing import WriteError, writing
+from bearcat.cli.main import COMMANDS, build_parser, main
+from bearcat.cli.writing import WriteError, writing
 from tests.support.scenario_files import write_scenario
 
 GAME = ("--map", "ctf-10", "--grid", "17", "--scheme", "first", "--capture-radius", "1.0", "--stages", "return")

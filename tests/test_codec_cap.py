@@ -12,8 +12,8 @@ from bearcat.bus import keys
 from bearcat.bus.codec import MAX_PAYLOAD, Refused, decode, encode
 from bearcat.bus.messages import OUTLINE_LINES, OUTLINE_POINTS, Guidance, Report
 from bearcat.maps import load_map
+from bearcat.runtime.simulate import simulate
 from bearcat.scenarios.schema import load_scenario
-from bearcat.scenarios.simulate import simulate
 
 NAME = "n" * 64  # the longest name a key allows
 

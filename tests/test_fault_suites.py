@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pytest
 
-from bearcat.cli import main
+from bearcat.cli.main import main
 from bearcat.scenarios.faults import KINDS, FaultError
-from bearcat.scenarios.suites import builtin_suite, load_suite
+from bearcat.suites.suite import builtin_suite, load_suite
 
 
 def test_the_builtin_suite_covers_every_fault_kind_against_the_three_games():

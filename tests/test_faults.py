@@ -16,12 +16,12 @@ import numpy as np
 import pytest
 
 from bearcat.agents.ground_station.event_log import read_events
-from bearcat.cli import main
-from bearcat.scenarios.checker import check_run
+from bearcat.cli.main import main
+from bearcat.runtime.run_directory import fresh, write_scenario
+from bearcat.runtime.simulate import simulate
 from bearcat.scenarios.faults import FaultError, load_faults, parse_faults
-from bearcat.scenarios.run_directory import fresh, write_scenario
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
-from bearcat.scenarios.simulate import simulate
+from bearcat.suites.checker import check_run
 from tests.support.scenario_files import scenario_text
 
 LEASE = 3.0

@@ -30,9 +30,9 @@ from bearcat.bus.codec import decode, encode
 from bearcat.bus.messages import Fix, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.netem.profiles import load_profile
+from bearcat.runtime.launch import agent_failures, free_port
+from bearcat.runtime.live import run_peer
 from bearcat.scenarios.cast import build_cast
-from bearcat.scenarios.launch import agent_failures, free_port
-from bearcat.scenarios.live import run_peer
 from bearcat.scenarios.schema import load_scenario
 from tests.support.faulty import Faulty
 from tests.support.live_runs import game_started, start_launcher, wait_for
@@ -56,7 +56,7 @@ def peers_of(path) -> list[int]:
 
 
 def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
-    from bearcat.scenarios.checker import check_run
+    from bearcat.suites.checker import check_run
 
     launcher, out, path = start_run(tmp_path, time_limit=6.0)
     output, _ = launcher.communicate(timeout=180)
@@ -310,7 +310,7 @@ def test_a_walker_whose_ground_station_is_gone_for_a_lease_stops_by_itself_sayin
 
 
 def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path):
-    from bearcat.scenarios.live import fetch_scenario
+    from bearcat.runtime.live import fetch_scenario
 
     launcher, out, _path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:

@@ -1,6 +1,6 @@
 """The progress bars: a log file gets a few redraws of a long solve, not one per step, and the last one is whole."""
 
-from bearcat.progress import counting, solve_bars
+from bearcat.cli.progress import counting, solve_bars
 
 
 def test_a_solve_logged_to_a_file_is_redrawn_rarely_and_ends_at_its_horizon(capsys):

@@ -11,9 +11,9 @@ import pytest
 from bearcat.agents.ground_station.ctf_cache import cached, load_or_solve, provisional_grid
 from bearcat.maps import load_map
 from bearcat.netem.profiles import load_profile
+from bearcat.runtime.solve_ahead import SolveBehind
 from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
-from bearcat.solve_ahead import SolveBehind
 from bearcat.solvers.ctf_queries import CtfQueries
 from tests.test_guidance import fixes_at
 

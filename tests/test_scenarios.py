@@ -179,7 +179,7 @@ def test_an_unknown_scenario_is_named(tmp_path):
 
 
 def test_study_summaries_count_goes_false_goes_and_real_windows():
-    from bearcat.scenarios.studies import study_tasks, summarise
+    from bearcat.studies.thesis import study_tasks, summarise
 
     rows = [
         {"scenario": "s", "netem": "wifi", "winner": "attacker", "went_at": 3.0, "true_value": -0.5},
@@ -196,7 +196,7 @@ def test_study_summaries_count_goes_false_goes_and_real_windows():
 
 
 def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():
-    from bearcat.scenarios.studies import wilson
+    from bearcat.studies.thesis import wilson
 
     low, high = wilson(32, 50)
     assert (round(low, 3), round(high, 3)) == (0.501, 0.759)  # p = 0.64, n = 50

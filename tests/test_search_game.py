@@ -14,8 +14,8 @@ import pytest
 
 from bearcat.agents.ground_station.event_log import read_events
 from bearcat.agents.ground_station.uav_tasking import TRACK_FOR
+from bearcat.runtime.simulate import simulate
 from bearcat.scenarios.schema import ScenarioError, load_scenario, parse_scenario
-from bearcat.scenarios.simulate import simulate
 
 
 def _text(**changes) -> str:

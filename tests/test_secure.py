@@ -21,7 +21,7 @@ from bearcat.bus import keys
 from bearcat.bus.codec import encode
 from bearcat.bus.identity import Credentials, add_members, make_authority
 from bearcat.bus.messages import Control, Fix
-from bearcat.scenarios.credentials import add_to
+from bearcat.runtime.credentials import add_to
 from bearcat.scenarios.schema import load_scenario
 from tests.support.intruder import Intruder
 from tests.support.live_runs import game_started, start_launcher

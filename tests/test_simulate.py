@@ -16,9 +16,9 @@ from bearcat.bus import keys
 from bearcat.bus.messages import Control, Truth
 from bearcat.maps import load_map
 from bearcat.netem.profiles import load_profile
+from bearcat.runtime.simulate import simulate
 from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import load_scenario
-from bearcat.scenarios.simulate import simulate
 from tests.support.faulty import Faulty
 from tests.support.scenario_files import write_scenario
 
@@ -233,7 +233,7 @@ def test_a_restarted_referee_resumes_the_game_clock_the_flag_and_the_captures():
 
 
 def test_outcome_json_of_the_cli_matches_the_event_log(tmp_path):
-    from bearcat.cli import main
+    from bearcat.cli.main import main
 
     path = write_scenario(tmp_path)
     assert main(["simulate", str(path), "--trials", "2", "--seed", "4", "--out", str(tmp_path / "out"), "--json"]) == 0
@@ -327,7 +327,7 @@ def test_robust_guidance_sends_each_report_s_disk_and_the_recording_draws_them(t
     """Each report's radius is at least the distance its agent could walk
     since the fix (3 m/s), the robust answers say when the plain one would
     differ, and the recording has the disks on the phone and beside the truth."""
-    from bearcat.cli import main
+    from bearcat.cli.main import main
 
     path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, robust=True)
     assert main(["simulate", str(path), "--seed", "4", "--out", str(tmp_path / "out")]) == 0

@@ -2,7 +2,7 @@
 
 import pytest
 
-from bearcat.scenarios.studies import summarise_search, wilson
+from bearcat.studies.thesis import summarise_search, wilson
 
 
 @pytest.mark.parametrize(

@@ -1,0 +1,436 @@
+"""``bearcat run`` and ``bearcat peer``: live runs, every peer its own process over Zenoh."""
+
+from __future__ import annotations
+
+import argparse
+from contextlib import nullcontext
+from pathlib import Path
+
+from bearcat.cli import arguments
+from bearcat.cli.presolve import await_behind, presolve
+from bearcat.cli.writing import make_directory, writing
+from bearcat.runtime.peers import NETWORKS
+from bearcat.runtime.run_directory import fresh
+from bearcat.runtime.solve_ahead import SolveBehind, compile_queries_behind
+from bearcat.scenarios.faults import GROUND, load_faults
+from bearcat.scenarios.schema import TRANSPORTS, load_scenario
+
+
+def register(subparsers) -> None:
+    run = subparsers.add_parser(
+        "run",
+        description="Start the ground station and one walker peer per agent as processes on this host, wait "
+        "for all of them, start the game, and stop every peer when it ends (or on Ctrl-C, or when a peer dies).",
+    )
+    run.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
+    run.add_argument(
+        "--out",
+        type=Path,
+        metavar="DIR",
+        help="run directory (default ./runs/SCENARIO-SEED; DIR-1, DIR-2, ... if it holds something already)",
+    )
+    run.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
+    run.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    run.add_argument(
+        "--network",
+        choices=NETWORKS,
+        default="shim",
+        help="shim (default): each peer impairs the messages it receives; kernel: every peer in a network "
+        "namespace of its own, its packets impaired by the kernel (needs root)",
+    )
+    run.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        help="how fixes and guidance travel: tcp (retransmitted, late) or udp (lost); default: the scenario's",
+    )
+    run.add_argument(
+        "--faults",
+        type=Path,
+        metavar="FILE",
+        help="a fault plan ([[fault]] tables) to apply instead of the scenario's own",
+    )
+    run.add_argument(
+        "--certs",
+        type=Path,
+        metavar="DIR",
+        help="certificates of every peer (bearcat certs init); default: a new authority for this run alone",
+    )
+    run.add_argument(
+        "--secure",
+        action="store_true",
+        help="a guarded bus: the router takes only tls/ links with a certificate from the run's authority, and "
+        "lets each peer publish and read only what its role may (default-deny access control)",
+    )
+    run.add_argument(
+        "--phone",
+        action="append",
+        default=[],
+        metavar="AGENT",
+        help="a person plays AGENT from a real phone (repeatable): its page is served instead of a walker, the "
+        "link printed, and the game waits for the phone's first fix; the referee judges on fixes",
+    )
+    run.add_argument(
+        "--joins",
+        action="append",
+        default=[],
+        metavar="AGENT",
+        help="AGENT's peer is started by hand, not by the launcher (repeatable): a walker in another terminal or, "
+        "with --phone AGENT, the page bridge (bearcat phone, e.g. with a certificate of your own); the launcher "
+        "prints the command and waits for it",
+    )
+    run.add_argument(
+        "--page",
+        type=_address,
+        default=("0.0.0.0", 8443),
+        metavar="HOST:PORT",
+        help="where the phones' pages are served (default 0.0.0.0:8443; the next phone on the next port)",
+    )
+    run.add_argument(
+        "--wait-for-sets",
+        action="store_true",
+        help="solve the scenario's sets before the game starts; by default a capture-the-flag game whose sets "
+        "are not cached starts at once on provisional ones (rules.provisional_grid) while they solve behind it",
+    )
+    run.add_argument("--viewer", action="store_true", help="open the recording in the Rerun viewer at the end")
+    run.add_argument("--headless", action="store_true", help="no viewer (the default)")
+    run.set_defaults(run=run_live)
+
+    view = subparsers.add_parser(
+        "view",
+        description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing), "
+        "or save a picture of it at a game time.",
+    )
+    view.add_argument(
+        "run_dir", metavar="RUN", type=Path, help="a run directory (bearcat run --out, bearcat simulate --out)"
+    )
+    view.add_argument(
+        "--screenshot",
+        type=Path,
+        metavar="PNG",
+        help="render headless to this PNG instead of opening a window (needs a Vulkan driver such as mesa's)",
+    )
+    view.add_argument(
+        "--at",
+        type=arguments.non_negative,
+        metavar="SECONDS",
+        help="with --screenshot: the game time to show, in seconds from the start (default: the end)",
+    )
+    view.set_defaults(run=run_view)
+
+    peer = subparsers.add_parser(
+        "peer",
+        description="Start one peer of a scenario: the ground station (referee, guidance and UAV tasking), one "
+        "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
+    )
+    peer.add_argument("role", choices=("ground-station", "walker", "phone", "uav"))
+    peer.add_argument(
+        "--scenario",
+        required=True,
+        metavar="SCENARIO",
+        help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station",
+    )
+    peer.add_argument(
+        "--id", default="gs", metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
+    )
+    peer.add_argument(
+        "--connect",
+        action="append",
+        default=[],
+        metavar="ENDPOINT",
+        help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
+    )
+    peer.add_argument(
+        "--listen",
+        action="append",
+        metavar="ENDPOINT",
+        help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0; clients do not listen)",
+    )
+    peer.add_argument(
+        "--mode",
+        choices=("peer", "client"),
+        default="peer",
+        help="Zenoh mode: peer (default) or client of the router it connects to (what bearcat run uses)",
+    )
+    peer.add_argument(
+        "--judge",
+        choices=("truth", "fixes"),
+        default="truth",
+        help="what the referee judges on: the simulation's truth (default), or the fixes, for real players",
+    )
+    peer.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
+    peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
+    peer.add_argument(
+        "--network",
+        choices=NETWORKS,
+        default="shim",
+        help="shim (default): this peer impairs what it receives; kernel: the network it runs on does "
+        "(GPS and compass error stay in the phone)",
+    )
+    peer.add_argument(
+        "--transport",
+        choices=TRANSPORTS,
+        help="how fixes and guidance travel: tcp, or udp to the same endpoints; default: the scenario's",
+    )
+    peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
+    peer.add_argument(
+        "--certs",
+        type=Path,
+        metavar="DIR",
+        help="the game's certificates (RUN/certs of a bearcat run, or bearcat certs init): this peer seals what "
+        "it sends with ID.key and believes only senders the authority vouches for; without it, every name",
+    )
+    peer.add_argument(
+        "--secure",
+        action="store_true",
+        help="join a guarded bus: a client of the router over tls/ only, presenting ID.pem from --certs",
+    )
+    peer.add_argument(
+        "--faults", type=Path, metavar="FILE", help="the run's fault plan: apply the faults the launcher announces"
+    )
+    peer.add_argument(
+        "--resume",
+        action="store_true",
+        help="take up the game where this peer's log in --out DIR left it (a peer restarted mid-game)",
+    )
+    peer.add_argument(
+        "--vehicle",
+        metavar="URL",
+        help="uav: MAVSDK URL of the vehicle, e.g. udpin://0.0.0.0:14540 (PX4 SITL, bearcat vehicle) "
+        "or serial:///dev/ttyACM0:57600 (a real PX4)",
+    )
+    peer.add_argument(
+        "--sysid", type=int, metavar="N", help="uav: the vehicle's MAVLink system id (default: the first autopilot)"
+    )
+    peer.add_argument(
+        "--emulated",
+        action="store_true",
+        help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see",
+    )
+    peer.add_argument(
+        "--provisional",
+        action="store_true",
+        help="ground-station: while the scenario's sets are not in the cache, answer from provisional ones "
+        "(rules.provisional_grid) and take the scenario's up once another process has solved them",
+    )
+    _page_arguments(peer, listen="--page")
+    peer.set_defaults(run=run_peer)
+
+    phone = subparsers.add_parser(
+        "phone",
+        description="Let a person play from a real phone: serve a page to the phone's browser over HTTPS and "
+        "bridge it to the game (its GPS and compass as fixes, the ground station's guidance on its screen). "
+        "Prints the link and a QR code to open on the phone.",
+    )
+    phone.add_argument("--connect", action="append", required=True, metavar="ENDPOINT", help="the game's router")
+    phone.add_argument("--game", required=True, metavar="GAME", help="the game (its ground station serves the map)")
+    phone.add_argument("--id", required=True, metavar="AGENT", help="the agent this person plays")
+    phone.add_argument("--certs", type=Path, metavar="DIR", help="the game's certificates (as for bearcat peer)")
+    phone.add_argument("--secure", action="store_true", help="join a guarded bus over tls/ (as for bearcat peer)")
+    phone.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
+    _page_arguments(phone, listen="--listen")
+    phone.set_defaults(run=run_phone)
+
+
+def run_live(args) -> int:
+    from bearcat.runtime.launch import launch, preflight
+    from bearcat.scenarios.cast import awaited_sets, unsolved
+
+    if args.network == "kernel":
+        from bearcat.netem.kernel.commands import KernelError
+        from bearcat.netem.kernel.network import missing
+
+        if (why := missing()) is not None:
+            raise KernelError(why)
+    scenario = load_scenario(args.scenario)
+    plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
+    seed = scenario.seed if args.seed is None else args.seed
+    netem = args.netem or scenario.netem
+    preflight(
+        scenario,
+        plan,
+        transport=args.transport or scenario.transport,
+        secure=args.secure,
+        certs=args.certs,
+        phones=tuple(args.phone),
+        joins=tuple(args.joins),
+    )
+    out = fresh(args.out or Path("runs") / f"{scenario.name}-{seed}")
+    make_directory(out, "run directory")
+
+    def say(text: str) -> None:
+        print(text, flush=True)
+
+    awaited = None if args.wait_for_sets else awaited_sets(scenario)
+    behind = None
+    compiling = compile_queries_behind() if unsolved(scenario) else None  # numba's cache may be empty too
+    try:
+        presolve(scenario, netem, provisional=awaited is not None)
+        if awaited is not None:
+            behind = SolveBehind(awaited)
+            say(
+                f"{scenario.name}: guidance starts on the {awaited.provisional}-point sets and takes up the "
+                f"{awaited.game.grid_points}-point sets once they are solved behind the game"
+            )
+        with writing(out, "run directory"):
+            outcome = launch(
+                scenario,
+                _reference(args.scenario),
+                out,
+                seed=seed,
+                netem=netem,
+                transport=args.transport,
+                network=args.network,
+                say=say,
+                faults=plan,
+                certs=args.certs,
+                secure=args.secure,
+                phones=tuple(args.phone),
+                joins=tuple(args.joins),
+                page=args.page,
+                provisional=awaited is not None,
+            )
+        who = f"{outcome.winner} wins" if outcome.winner else "no winner"
+        say(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")
+        say(f"run directory: {out} (events.jsonl, outcome.json, recording.rrd, peers/); replay: bearcat view {out}")
+        if behind is not None and outcome.reason != "interrupted":
+            await_behind(behind, say)
+    finally:
+        if behind is not None:
+            behind.stop()
+        if compiling is not None:
+            compiling.terminate()
+            compiling.join()
+    if args.viewer:
+        _open_viewer(out / "recording.rrd")
+    return 0 if outcome.ended else 1
+
+
+def run_view(args) -> int:
+    from bearcat.agents.ground_station.rerun_recording import write_recording
+    from bearcat.maps import read_geojson
+
+    rrd = args.run_dir / "recording.rrd"
+    if not rrd.exists():
+        events, map_file = args.run_dir / "events.jsonl", args.run_dir / "map.geojson"
+        if not (events.exists() and map_file.exists()):
+            raise FileNotFoundError(
+                f"{args.run_dir} is not a run directory: it has no recording.rrd nor events.jsonl and map.geojson"
+            )
+        write_recording(events, read_geojson(map_file), rrd, name=args.run_dir.name)
+    if args.screenshot is not None:
+        from bearcat.figures.screenshot import screenshot
+
+        shown = screenshot(rrd, args.screenshot, at=args.at)
+        print(f"{args.screenshot}: {args.run_dir} at {shown:.1f} s of game time")
+        return 0
+    if args.at is not None:
+        raise arguments.UsageError("--at needs --screenshot: the viewer's time line sets the time of an open window")
+    return _open_viewer(rrd)
+
+
+def _open_viewer(rrd: Path, *extra: str) -> int:
+    import shutil
+    import subprocess
+
+    viewer = shutil.which("rerun")
+    if viewer is None:
+        raise FileNotFoundError("the Rerun viewer is not installed: pip install rerun-sdk")
+    return subprocess.call([viewer, str(rrd), *extra])
+
+
+def run_peer(args) -> int:
+    from bearcat.runtime.live import fetch_scenario, start_peer
+
+    name = args.id if args.role != "ground-station" else GROUND
+    if args.scenario.startswith("zenoh:"):
+        scenario = fetch_scenario(
+            args.scenario[len("zenoh:") :], args.connect, certs=args.certs, name=name, secure=args.secure
+        )
+    else:
+        scenario = load_scenario(args.scenario)
+    if args.role == "ground-station":
+        presolve(scenario, args.netem or scenario.netem, provisional=args.provisional)
+    plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
+    with nullcontext() if args.out is None else writing(args.out, "run directory"):
+        reason = start_peer(
+            args.role,
+            scenario,
+            args.id,
+            connect=args.connect,
+            listen=args.listen,
+            mode=args.mode,
+            transport=args.transport or scenario.transport,
+            network=args.network,
+            judge=args.judge,
+            seed=scenario.seed if args.seed is None else args.seed,
+            netem=args.netem or scenario.netem,
+            out=args.out,
+            vehicle=args.vehicle,
+            sysid=args.sysid,
+            emulated=args.emulated,
+            faults=plan,
+            resume=args.resume,
+            certs=args.certs,
+            secure=args.secure,
+            page=_page_server(args) if args.role == "phone" else None,
+            say=lambda text: print(text, flush=True),
+            provisional=args.provisional,
+        )
+    print(f"peer {name}: {reason}", flush=True)
+    return 0
+
+
+def run_phone(args) -> int:
+    """``bearcat phone``: ``bearcat peer phone`` with the scenario fetched from the game's ground station."""
+    args.role, args.scenario, args.mode, args.listen = "phone", f"zenoh:{args.game}", "client", None
+    args.faults = args.resume = args.vehicle = args.sysid = None
+    args.seed = args.netem = args.transport = None
+    args.network, args.judge, args.emulated, args.provisional = "shim", "fixes", False, False
+    server = _page_server(args)
+    print(f"open {server.url()} on the phone of {args.id}\n{server.qr()}", flush=True)
+    return run_peer(args)
+
+
+def _page_arguments(parser, *, listen: str) -> None:
+    """The options of a real phone's page: where it is served, its certificate, its token."""
+    parser.add_argument(
+        listen,
+        dest="listen_page",
+        type=_address,
+        default=("0.0.0.0", 8443),
+        metavar="HOST:PORT",
+        help="phone: where its page is served over HTTPS (default 0.0.0.0:8443)",
+    )
+    parser.add_argument("--cert", type=Path, metavar="FILE", help="phone: the page's HTTPS certificate (PEM)")
+    parser.add_argument(
+        "--key", type=Path, metavar="FILE", help="phone: its key; without --cert/--key, one is made for the session"
+    )
+    parser.add_argument(
+        "--token-file",
+        type=Path,
+        metavar="FILE",
+        help="phone: the secret the page's link carries (default: a new one, printed in the link)",
+    )
+
+
+def _page_server(args):
+    from bearcat.agents.human.browser_bridge import PageServer, new_token
+
+    if (args.cert is None) != (args.key is None):
+        raise arguments.UsageError("--cert and --key go together: the page's certificate and its key")
+    token = args.token_file.read_text().strip() if args.token_file else new_token()
+    host, port = args.listen_page
+    return PageServer(host=host, port=port, token=token, cert=args.cert, key=args.key)
+
+
+def _address(text: str) -> tuple[str, int]:
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT, e.g. 0.0.0.0:8443")
+    return host, int(port)
+
+
+def _reference(text: str) -> str:
+    """How child processes find the scenario: built-in names as they are, files by absolute path."""
+    path = Path(text)
+    return str(path.resolve()) if path.exists() else text

@@ -1,0 +1,178 @@
+"""``bearcat study fake-out|holding|go-no-go|search``: batches of simulated
+games, resumable, with a table and a figure at the end (``DIR/results.jsonl``
+per game, ``DIR/summary.json``, ``DIR/STUDY.png``).
+
+``--human defender`` plays the study's games live instead, one after the
+other, with a person driving the defender from the keyboard; each game is
+appended to the same results file, under its own labels, so people's results
+sit beside the models' in the same table.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+from bearcat.cli import arguments
+from bearcat.cli.output import Output
+from bearcat.cli.progress import counting
+from bearcat.cli.writing import make_directory, writing
+from bearcat.scenarios.schema import TRANSPORTS
+from bearcat.studies.thesis import STUDIES
+
+
+def register(subparsers) -> None:
+    p = subparsers.add_parser(
+        "study",
+        description=" ".join(f"{name}: {study.description}." for name, study in STUDIES.items()),
+    )
+    p.add_argument("study", choices=tuple(STUDIES))
+    p.add_argument("--trials", type=int, default=200, metavar="N", help="games per cell and profile (default 200)")
+    p.add_argument("--seed", type=arguments.seed, default=0, metavar="S", help="seed of the first game (default 0)")
+    p.add_argument("--netem", nargs="+", metavar="PROFILE", help="profiles to play on (default: the study's)")
+    p.add_argument(
+        "--transport",
+        nargs="+",
+        choices=TRANSPORTS,
+        help="transports to compare (default: each scenario's own): tcp, udp or both",
+    )
+    p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per core)")
+    p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
+    p.add_argument(
+        "--human",
+        choices=("defender",),
+        help="a person plays this side from the keyboard, live, in the study's scenario (fake-out)",
+    )
+    p.add_argument(
+        "--json",
+        action="store_true",
+        help="print the table's rows (DIR/summary.json) as JSON and nothing else on stdout (the table goes to stderr)",
+    )
+    p.set_defaults(run=run)
+
+
+def run(args) -> int:
+    from bearcat.cli.presolve import presolve
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.schema import load_scenario
+    from bearcat.studies.batch import read_results, run_batch
+    from bearcat.studies.thesis import play_task, study_tasks
+
+    for profile in args.netem or ():
+        load_profile(profile)
+    if args.trials < 1:
+        raise arguments.UsageError("--trials must be at least 1")
+    if args.human is not None and args.study != "fake-out":
+        raise arguments.UsageError(f"--human plays the fake-out study; {args.study} has no human side")
+    arguments.check_seeds(args.seed, args.trials)
+    report = Output(args.json)
+    out = args.out or Path("studies") / args.study
+    make_directory(out, "results directory")
+    study = STUDIES[args.study]
+    # Solve each scenario's game once here, so the workers only load it.
+    for name in dict.fromkeys(cell.scenario for cell in study.cells):
+        scenario = load_scenario(name)
+        presolve(scenario, scenario.netem)
+    with writing(out, "results directory"):
+        if args.human is not None:
+            from bearcat.studies.human_trials import play_human_trials
+
+            play_human_trials(out, args.human, args.trials, args.seed, say=report.say)
+            results = read_results(out / "results.jsonl")  # the models' games beside the person's
+        else:
+            tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
+            with counting(len(tasks), args.study, "game") as finished:
+                results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=finished)
+            wanted = {t["key"] for t in tasks}
+            results = {k: r for k, r in results.items() if k in wanted}
+        rows = summary_rows(args.study, results.values())
+        (out / "summary.json").write_text(json.dumps(rows, indent=2) + "\n")
+    report.say(TABLES[args.study](rows))
+    report.say(f"per-game results in {out}/results.jsonl; replay one with bearcat simulate SCENARIO --seed S --netem P")
+    from bearcat.figures.studies import FIGURES
+
+    report.figure(FIGURES[args.study](rows), out / f"{args.study}.png", dpi=110)
+    report.json(rows)
+    return 0
+
+
+def summary_rows(study: str, results) -> list[dict]:
+    from bearcat.studies.thesis import summarise, summarise_search
+
+    if study == "search":
+        return summarise_search(results)
+    return summarise(results, STUDIES[study].by)
+
+
+def _search_table(rows) -> str:
+    lines = [
+        f"{'search':<14}{'games':>6}{'found':>7}{'median s':>10}{'mean s':>8}{'attacker wins':>15}{'95% interval':>15}"
+    ]
+    for r in rows:
+        median = "-" if r["median_time_to_find"] is None else f"{r['median_time_to_find']:.1f}"
+        mean = "-" if r["mean_time_to_find"] is None else f"{r['mean_time_to_find']:.1f}"
+        low, high = r["win_rate_95"]
+        lines.append(
+            f"{r['search']:<14}{r['games']:>6}{r['found']:>7}{median:>10}{mean:>8}"
+            f"{r['attacker_wins']:>9} ({100 * r['attacker_win_rate']:.0f}%){f'{100 * low:.0f}-{100 * high:.0f}%':>13}"
+        )
+    return "\n".join(lines)
+
+
+def _rate(count: int, games: int, interval) -> str:
+    low, high = interval
+    return f"{count}/{games} {100 * count / games:.0f}% ({100 * low:.0f}-{100 * high:.0f})"
+
+
+def _goes_table(rows) -> str:
+    lines = [
+        f"{'guidance':<18}{'network':<17}{'attacker wins (95%)':>24}{'goes':>6}{'false goes (95%)':>24}"
+        f"{'really open':>13}{'of them won':>13}"
+    ]
+    for r in rows:
+        false = "-" if not r["goes"] else _rate(r["false_goes"], r["goes"], r["false_go_interval"])
+        lines.append(
+            f"{r['guidance']:<18}{r['netem'] + '/' + r['transport']:<17}"
+            f"{_rate(r['attacker_wins'], r['games'], r['attacker_win_interval']):>24}{r['goes']:>6}{false:>24}"
+            f"{r['goes_really_open']:>13}{r['really_open_won']:>13}"
+        )
+    return "\n".join(lines)
+
+
+def _holding_table(rows) -> str:
+    guidance = list(dict.fromkeys(r["guidance"] for r in rows))
+    lines = [f"{'network':<17}{'report Hz':>10}" + "".join(f"{g:>26}" for g in guidance)]
+    cells = {(r["netem"] + "/" + r["transport"], r["rate"], r["guidance"]): r for r in rows}
+    for network, rate in dict.fromkeys((n, h) for n, h, _ in cells):
+        line = f"{network:<17}{rate:>10g}"
+        for g in guidance:
+            r = cells.get((network, rate, g))
+            line += f"{'-' if r is None else _rate(r['defender_wins'], r['games'], r['defender_win_interval']):>26}"
+        lines.append(line)
+    return "defender holds (defender wins, 95% interval)\n" + "\n".join(lines)
+
+
+def _fake_out_table(rows) -> str:
+    people = [r for r in rows if r["defender"] == "human"]
+    rows = [r for r in rows if r["defender"] != "human"]
+    reactions = sorted({r["reaction"] for r in rows})
+    lines = ["attacker wins (95% interval) by the defender's reaction time (s)"]
+    for rate in sorted({r["rate"] for r in rows}):
+        lines.append(f"phones reporting at {rate:g} Hz")
+        lines.append(f"{'defender':<26}" + "".join(f"{t:>20g}" for t in reactions))
+        at_rate = [r for r in rows if r["rate"] == rate]
+        for defender, marking in dict.fromkeys((r["defender"], r["marking"]) for r in at_rate):
+            name = defender if marking is None else f"{defender}, marks {marking:g} m"
+            line = f"{name:<26}"
+            mine = {r["reaction"]: r for r in at_rate if (r["defender"], r["marking"]) == (defender, marking)}
+            for t in reactions:
+                r = mine.get(t)
+                line += f"{'-' if r is None else _rate(r['attacker_wins'], r['games'], r['attacker_win_interval']):>20}"
+            lines.append(line)
+    for r in people:
+        won = _rate(r["attacker_wins"], r["games"], r["attacker_win_interval"])
+        lines.append(f"a person as the defender, phones at {r['rate']:g} Hz: attacker wins {won}")
+    return "\n".join(lines)
+
+
+TABLES = {"fake-out": _fake_out_table, "holding": _holding_table, "go-no-go": _goes_table, "search": _search_table}

@@ -1,2 +1,0 @@
-"""The commands' modules; each exposes ``register(subparsers)``, and
-``bearcat.cli.COMMANDS`` says which module holds which command."""

@@ -1,0 +1,1 @@
+"""Matplotlib figures of games, studies and maneuvers, and screenshots of Rerun recordings."""

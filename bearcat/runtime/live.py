@@ -1,0 +1,583 @@
+"""The live runtime: one peer process, its agents driven by the wall clock
+over Zenoh.
+
+Zenoh's callbacks run on its own threads; they only hand each sample to the
+asyncio loop, where the receiving end's netem shim decides when it arrives
+and the agent handles it. Each agent ticks at its period on the wall clock
+(without drift: the next tick is scheduled from the last one's due time,
+not from when it ran). A liveliness token announces each agent. The peer
+ends a second after it sees the game end (so its last messages get out),
+on a stop from the launcher, on SIGINT/SIGTERM, or once the ground station
+has been gone for longer than the lease (a player's peer has nobody to play
+for), and closes its session in every case.
+
+A ground station that started on provisional sets (``cast.AwaitedSets``)
+looks in the cache for its own once a second, off the loop, and hands
+them to its agents on the loop once they are there, noting both in its
+log (``sets`` lines).
+
+A run with a fault plan announces each fault as it begins on the game's
+fault key; the peer applies what concerns it (``fault_effects``): its
+shim cuts or degrades links (on the shim only: on a kernel network the
+hub drops the packets), its agents' clock jumps or drifts, its phone's
+GPS lies. Only the launcher announces faults.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import logging
+import signal
+import threading
+import time
+from contextlib import closing
+
+from bearcat.agents.ground_station.ctf_cache import cached
+from bearcat.agents.ground_station.event_log import EventLog
+from bearcat.bus import keys
+from bearcat.bus.clock import WallClock
+from bearcat.bus.codec import Inbox
+from bearcat.bus.handoff import Handoff
+from bearcat.bus.messages import Control, FaultNotice, GameState
+from bearcat.netem.shim import Shim
+from bearcat.runtime.dispatch import Dispatcher
+from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, skewed
+from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
+from bearcat.solvers.ctf_queries import CtfQueries
+
+log = logging.getLogger(__name__)
+
+LINGER = 1.0  # s a peer stays up after the game ended
+POLL = 0.1
+AWAIT_POLL = 1.0  # s between looks in the cache for the sets a ground station awaits
+SHUTDOWN_WAIT = 2.0  # s a UAV peer waits, on its way out, for a vehicle that does not answer
+
+
+async def run_peer(
+    agents,
+    session,
+    game: str,
+    *,
+    shim: Shim | None = None,
+    record: EventLog | None = None,
+    faults: tuple = (),
+    network: str = "shim",
+    lease: float | None = None,
+    awaited=None,
+    adopt=None,
+    say=None,
+    warm_up=None,
+) -> str:
+    """Drive ``agents`` on ``session`` until the game ends; why it stopped,
+    and how often each agent failed if any did. The session is closed on the
+    way out, while the loop still stands, so no late sample is handed to it.
+    ``faults`` is the run's fault plan, ``network`` where it runs; with a
+    ``lease``, the peer stops when the ground station has been gone that long.
+    ``awaited`` (``cast.AwaitedSets``) are the sets to hand to ``adopt``
+    once they are in the cache, which ``say`` is told of; ``warm_up()``
+    (``Cast.warm_up``) is run off the event loop before the peer says it is
+    up, so that the game starts with the guidance ready."""
+    loop = asyncio.get_running_loop()
+    clock = WallClock()
+    record = record or EventLog(None)
+    dispatch = Dispatcher(record, clock.now)
+    finished = asyncio.Event()
+    why = {"reason": "stopped"}
+
+    def handler(agent):
+        def handle(key, payload, sender):
+            if session.closed:  # held by the shim past the end of the peer
+                return
+            message = dispatch.receive(agent, key, payload, sender)
+            if isinstance(message, GameState) and message.phase == "ended" and not finished.is_set():
+                why["reason"] = f"game ended: {message.reason}"
+                loop.call_later(LINGER, finished.set)
+            if isinstance(message, Control) and message.command == "start" and shim is not None:
+                shim.epoch = message.t  # outage windows count from the start, on the launcher's clock
+            if isinstance(message, Control) and message.command == "stop":
+                why["reason"] = f"stopped by the launcher: {message.reason}"
+                loop.call_later(LINGER, finished.set)
+
+        def arrived(key, payload, sender):
+            now = clock.now()
+            if shim is None:
+                handle(key, payload, sender)
+                return
+            for d in shim.transmit(sender, agent.name, key, payload, now, token=(agent.name, key, sender)):
+                loop.call_later(max(d.at - now, 0.0), handle, key, d.payload, sender)
+
+        return handle, arrived
+
+    def watched(agent, key, alive) -> None:
+        if not session.closed:  # tokens vanish as the peer's own session closes
+            dispatch.peer(agent, key, alive)
+
+    soon = Handoff(loop).put  # from Zenoh's threads; what arrives while the peer shuts down is dropped
+
+    def refused(key, claimed, category, reason):
+        dispatch.unbelieved(session.name, key, claimed, f"{category}: {reason}")
+
+    session.on_refused = lambda *refusal: soon(refused, *refusal)
+
+    handles = {}
+    for agent in agents:
+        dispatch.attach(agent, session)
+        handle, arrived = handler(agent)
+        handles[agent.name] = handle
+        for expr in agent.subscriptions:
+            session.subscribe(expr, lambda k, p, s, arrived=arrived: soon(arrived, k, p, s))
+        for expr in agent.watches:
+            session.subscribe_liveliness(expr, lambda k, alive, a=agent: soon(watched, a, k, alive))
+
+    def on_notice(key, payload, sender):
+        notice = notices.accept(key, payload)
+        if not isinstance(notice, FaultNotice) or sender != LAUNCHER or notice.fault >= len(faults):
+            log.warning("a fault notice from %r was refused", sender)
+            return
+        fault, now = faults[notice.fault], clock.now()
+        if fault.kind in NETWORK_KINDS and network == "shim" and shim is not None:
+            apply_network(fault, shim, notice.start, notice.end, lambda peer: [peer])
+        elif isinstance(fault, Clock) and fault.target == session.name:
+            for agent in agents:
+                dispatch.clocks[agent.name] = skewed(fault, notice.start)
+            if notice.end is not None:
+                loop.call_later(notice.end - now, lambda: [dispatch.clocks.pop(a.name, None) for a in agents])
+        elif isinstance(fault, Gps):
+            for agent in agents:
+                if agent.name == fault.target and hasattr(agent, "phone"):  # a real phone's GPS is its own
+                    agent.phone.lie = lie(fault)
+                    if notice.end is not None:
+                        loop.call_later(notice.end - now, setattr, agent.phone, "lie", None)
+
+    notices = Inbox(session.name)
+    if faults:
+        session.subscribe(keys.fault(game), lambda k, p, s: soon(on_notice, k, p, s))
+
+    orphaned: dict[str, asyncio.TimerHandle] = {}
+
+    def ground(key, alive):
+        """The ground station's token came or went: a player's peer waits a lease for it, then stops."""
+        if alive:
+            for timer in orphaned.values():
+                timer.cancel()
+            orphaned.clear()
+        elif not orphaned and not finished.is_set():
+
+            def give_up():
+                why["reason"] = f"the ground station has been gone for {lease:g} s"
+                finished.set()
+
+            orphaned["timer"] = loop.call_later(lease, give_up)
+
+    if lease is not None and all(agent.role in ("walker", "phone") for agent in agents):
+        session.subscribe_liveliness(
+            keys.alive(game, "ground-station", GROUND), lambda k, alive: soon(ground, k, alive)
+        )
+
+    async def ticker(agent):
+        dispatch.start(agent)
+        due = loop.time()
+        while True:
+            due += agent.period
+            await asyncio.sleep(max(due - loop.time(), 0.0))
+            dispatch.tick(agent)
+
+    async def poller():
+        while True:
+            await asyncio.sleep(POLL)
+            now = clock.now()
+            for (receiver, key, sender), d in shim.poll(now):
+                loop.call_later(max(d.at - now, 0.0), handles[receiver], key, d.payload, sender)
+
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        try:
+            loop.add_signal_handler(sig, lambda: (why.update(reason="interrupted"), finished.set()))
+        except (NotImplementedError, RuntimeError):  # not the main thread
+            pass
+
+    async def take_up():
+        """Look for the awaited sets until they are there, then answer from them."""
+        grid = awaited.game.grid_points
+        record.note(clock.now(), "sets", grid=awaited.provisional, awaited=grid)
+        try:
+            while (found := await loop.run_in_executor(None, cached, awaited.game, awaited.stages)) is None:
+                await asyncio.sleep(AWAIT_POLL)
+            adopt(CtfQueries(found.solution))
+        except Exception as exc:  # the game goes on, on the provisional sets
+            log.warning("the %d-point sets were not taken up (%s); guidance stays on provisional sets", grid, exc)
+            return
+        record.note(clock.now(), "sets", grid=grid, awaited=None)
+        if say is not None:
+            say(f"guidance answers from the {grid}-point sets from now on")
+
+    async def warm():
+        began = clock.now()
+        try:
+            await loop.run_in_executor(None, warm_up)
+        except Exception as exc:  # the game's own first queries will show what is wrong
+            log.warning("the guidance could not be readied before the game (%s)", exc)
+            return
+        done = clock.now()
+        record.note(done, "warmed", seconds=round(done - began, 3))
+
+    if warm_up is not None:
+        await warm()  # before the tokens: the launcher starts the game once every peer is up
+    for agent in agents:
+        session.declare_token(keys.alive(game, agent.role, agent.name))
+    tasks = [asyncio.create_task(ticker(a)) for a in agents]
+    if awaited is not None:
+        tasks.append(asyncio.create_task(take_up()))
+    if shim is not None and (shim.dead_zones is not None or faults):
+        tasks.append(asyncio.create_task(poller()))
+    try:
+        await finished.wait()
+    finally:
+        for t in tasks:
+            t.cancel()
+        await asyncio.gather(*tasks, return_exceptions=True)
+        session.close()
+        record.close()
+    if dispatch.failures:
+        counts = ", ".join(f"{name} {n}" for name, n in sorted(dispatch.failures.items()))
+        return f"{why['reason']}; agent failures: {counts}"
+    return why["reason"]
+
+
+def start_peer(
+    role: str,
+    scenario,
+    agent: str,
+    *,
+    connect,
+    listen,
+    seed: int,
+    netem: str,
+    out=None,
+    mode="peer",
+    transport: str = "tcp",
+    network: str = "shim",
+    judge="truth",
+    vehicle: str | None = None,
+    sysid: int | None = None,
+    emulated: bool = False,
+    faults: tuple = (),
+    resume: bool = False,
+    certs=None,
+    secure: bool = False,
+    page=None,
+    say=None,
+    provisional: bool = False,
+) -> str:
+    """Build this peer's agents and run them until the game ends (``bearcat peer``).
+    With ``certs``, a directory holding this peer's certificate and key, it
+    seals what it sends and takes only what the access policy lets each
+    provable sender publish; without, it believes every name (a private host).
+    A ``secure`` peer is a client of a router over ``tls/`` alone, presenting
+    that certificate. A "phone" peer is a person's real phone: it serves the
+    page of ``page`` (a ``PageServer``), tells ``say`` where, and joins the
+    game once the page has sent its first fix.
+    ``faults`` is the run's fault plan; a peer restarted mid-game ``resume``s
+    from its own log in ``out``.
+    With ``transport`` "udp" its best-effort messages go to the same
+    endpoints over ``udp/`` (see ``bus.zenoh_session``). On a ``network``
+    "kernel" the links are impaired below it, so its shim keeps only the
+    dead zones; GPS and compass error stay in the phone either way.
+    A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
+    an ``emulated`` vehicle's telemetry is the truth. A ``provisional``
+    ground station whose sets are not cached answers from coarser ones and
+    takes its own up once they are (``bearcat run`` solves them meanwhile)."""
+    import shapely
+
+    from bearcat.bus.errors import BusError
+    from bearcat.bus.identity import Credentials
+    from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
+    from bearcat.netem.models import LinkModel
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import build_cast
+    from bearcat.scenarios.schema import ScenarioError
+
+    profile = load_profile(netem)
+    lease_ms = round(1000 * scenario.lease)
+    autopilot = None
+    players = None
+    if role == "ground-station":
+        players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge, provisional=provisional)
+        agents, name = players.ground, players.guidance.name
+    elif role == "uav":
+        from bearcat.agents.uav.autopilot import MavsdkAutopilot
+
+        if agent not in [u.id for u in scenario.uavs]:
+            raise ScenarioError(
+                f"{scenario.source}: there is no UAV {agent!r}; the UAVs are "
+                f"{', '.join(u.id for u in scenario.uavs) or 'none'}"
+            )
+        if not vehicle:
+            raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
+        autopilot = MavsdkAutopilot(vehicle, sysid=sysid)
+        players = build_cast(
+            scenario,
+            profile,
+            seed,
+            people=[],
+            uavs=[agent],
+            ground=False,
+            autopilots={agent: autopilot},
+            uav_truth=emulated,
+        )
+        agents, name = [players.uavs[agent]], agent
+    elif role == "phone":
+        from bearcat.agents.human.page_phone import PagePhone
+
+        if agent not in scenario.ids:
+            raise ScenarioError(
+                f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
+            )
+        agents, name = [PagePhone(scenario.name, agent, scenario.map)], agent
+    elif role == "walker":
+        if agent not in scenario.ids:
+            raise ScenarioError(
+                f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
+            )
+        players = build_cast(scenario, profile, seed, people=[agent], ground=False)
+        agents, name = [players.people[agent]], agent
+    else:
+        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker, phone or uav")
+    if resume and out is not None:
+        from bearcat.runtime.recovery import last_sent
+        from bearcat.runtime.recovery import resume as take_up
+
+        last = last_sent(f"{out}/peers/{name}.jsonl")
+        for agent in agents:
+            take_up(agent, last, scenario.name)
+    zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
+    positions: dict[str, tuple[float, float]] = {}
+    credentials = None if certs is None else Credentials(certs, name)
+    if secure:
+        _check_secure(credentials, connect)
+        mode, listen = "client", []  # a peer that listens could be reached around the router's access control
+    if mode == "client" and listen is None:
+        listen = []  # a client does not listen
+    with (
+        closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl", append=True)) as record,
+        ZenohSession(
+            name,
+            config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=credentials if secure else None),
+            best_effort=None
+            if transport == "tcp"
+            else config(
+                listen=[], connect=[best_effort_endpoint(e) for e in connect], mode="client", lease_ms=lease_ms
+            ),
+            credentials=credentials,
+        ) as session,
+    ):
+        if role == "ground-station":
+            # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.
+            from bearcat.maps.geojson import dumps
+
+            geojson = dumps(scenario.map, units="metres").encode()
+            session.serve(keys.map_query(scenario.name), lambda: geojson)
+            session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
+        if zones is not None:
+            # Dead zones need the position of each end of a link, which in
+            # simulation the truth tells: a player's peer needs only its own
+            # (the ground station's end stands still), the ground station every one.
+            def on_truth(key, payload, sender):
+                message = Inbox(name).accept(key, payload)
+                if message is not None:
+                    positions[message.agent] = scenario.map.to_local(message.lat, message.lon)
+
+            every = role == "ground-station"
+            session.subscribe(
+                keys.every(scenario.name, "truth") if every else keys.truth(scenario.name, name), on_truth
+            )
+        shim = Shim(
+            profile.link if network == "shim" else LinkModel(),
+            seed,
+            dead_zones=zones,
+            where=positions.get if zones is not None else None,
+            record=record.impaired,
+            colocated=(*GROUND_AGENTS, LAUNCHER),
+            epoch=None,
+            transport=transport,
+            lease=scenario.lease,
+        )
+        keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
+        if keyboard:
+            _read_keys(keyboard[0].behaviour)
+        peer = run_peer(
+            agents,
+            session,
+            scenario.name,
+            shim=shim,
+            record=record,
+            faults=faults,
+            network=network,
+            lease=scenario.lease,
+            awaited=None if players is None else players.awaited,
+            adopt=None if players is None else players.adopt,
+            say=say,
+            warm_up=None if players is None else players.warm_up,
+        )
+        if role == "phone":
+            return asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))
+        if autopilot is None:
+            return asyncio.run(peer)
+        with asyncio.Runner() as runner:
+            # MAVSDK's commands block a thread until the vehicle answers; one
+            # that never will (its vehicle died) must not keep the peer alive.
+            runner.get_loop().set_default_executor(DaemonExecutor())
+            return runner.run(_fly(autopilot, peer))
+
+
+async def _bridged(phone, page, peer, record, say) -> str:
+    """Serve ``phone``'s page, then play once the page has sent a fix; stop serving in every case."""
+    from bearcat.agents.human.browser_bridge import Bridge
+    from bearcat.bus.errors import BusError
+
+    def dropped(reason: str) -> None:
+        n = sum(phone.drops.values())
+        if n == 1 or n % 100 == 0:
+            log.warning("phone %s dropped a fix from its page (%d so far): %s", phone.name, n, reason)
+        record.refused(time.time(), phone.name, phone.name, keys.fix(phone.game, phone.name), reason)
+
+    bridge = Bridge(phone, page, time.time, on_drop=dropped)
+    playing = False
+    try:
+        try:
+            await bridge.start()
+        except OSError as exc:
+            raise BusError(
+                f"phone {phone.name}: its page cannot be served at {page.host}:{page.port}: {exc.strerror or exc}"
+            ) from None
+        say(f"phone {phone.name}: open {page.url()} on the phone; the game waits for its first fix")
+        await bridge.first_fix.wait()
+        playing = True
+        return await peer
+    finally:
+        if not playing:
+            peer.close()
+        await bridge.close()
+
+
+def _check_secure(credentials, connect) -> None:
+    """A sentence for a secure peer that could not be one."""
+    from bearcat.bus.errors import BusError
+
+    if credentials is None:
+        raise BusError("a --secure peer needs --certs DIR, the directory holding its certificate and key")
+    plain = [endpoint for endpoint in connect if not endpoint.startswith("tls/")]
+    if not connect or plain:
+        raise BusError(f"a --secure peer connects to a router over tls/ only, not {', '.join(plain) or 'nothing'}")
+
+
+class DaemonExecutor(concurrent.futures.ThreadPoolExecutor):
+    """Runs each call on a daemon thread of its own and, shutting down,
+    waits for them a moment (``SHUTDOWN_WAIT``) and no longer: a call stuck
+    in a library waiting for a vehicle that is gone is left behind, and dies
+    with the process."""
+
+    def __init__(self) -> None:
+        super().__init__(max_workers=1)  # asyncio takes no other kind; none of its workers ever starts
+        self._daemons: list[threading.Thread] = []
+
+    def submit(self, fn, /, *args, **kwargs):
+        future = concurrent.futures.Future()
+
+        def run():
+            if not future.set_running_or_notify_cancel():
+                return
+            try:
+                future.set_result(fn(*args, **kwargs))
+            except BaseException as exc:
+                future.set_exception(exc)
+
+        thread = threading.Thread(target=run, daemon=True, name="mavsdk-call")
+        self._daemons = [t for t in self._daemons if t.is_alive()] + [thread]
+        thread.start()
+        return future
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        if wait:
+            end = time.monotonic() + SHUTDOWN_WAIT
+            for thread in self._daemons:
+                thread.join(timeout=max(end - time.monotonic(), 0.0))
+
+
+async def _fly(autopilot, peer) -> str:
+    """Connect to the vehicle, then play; let go of it in every case."""
+    try:
+        await autopilot.connect()
+    except BaseException:
+        peer.close()  # the peer never started
+        raise
+    try:
+        return await peer
+    finally:
+        await autopilot.close()
+
+
+def fetch_scenario(
+    game: str, connect, timeout: float = 10.0, *, certs=None, name: str | None = None, secure: bool = False
+):
+    """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``);
+    with ``certs``, asked as peer ``name`` and taken only from a provable ground station (over
+    ``tls/`` when ``secure``)."""
+    import time
+
+    from bearcat.bus.errors import BusError
+    from bearcat.bus.identity import Credentials
+    from bearcat.bus.zenoh_session import ZenohSession, config
+    from bearcat.maps.geojson import parse_geojson
+    from bearcat.scenarios.schema import parse_scenario
+
+    credentials = None if certs is None else Credentials(certs, name)
+    asker = f"fetch-{int(time.time() * 1000) % 10**9}" if credentials is None else credentials.name
+    if secure:
+        _check_secure(credentials, connect)
+    how = config(connect=connect, **({"listen": [], "mode": "client", "tls": credentials} if secure else {}))
+    with ZenohSession(asker, how, credentials=credentials) as session:
+        end = time.monotonic() + timeout
+        text = geojson = None
+        while time.monotonic() < end and (text is None or geojson is None):
+            text = text or session.fetch(keys.scenario_query(game), timeout=1.0)
+            geojson = geojson or session.fetch(keys.map_query(game), timeout=1.0)
+    if text is None or geojson is None:
+        raise BusError(
+            f"no ground station of game {game!r} answered at {', '.join(connect) or 'the default endpoints'}"
+        )
+    game_map = parse_geojson(geojson.decode(), source=f"the map of game {game}", default_name=game)
+    return parse_scenario(text.decode(), source=f"the scenario of game {game}", game_map=game_map)
+
+
+def _read_keys(behaviour) -> None:
+    """Feed arrow keys and WASD from this terminal to a keyboard behaviour, on a thread."""
+    import sys
+    import termios
+    import threading
+    import tty
+
+    from bearcat.scenarios.schema import ScenarioError
+
+    if not sys.stdin.isatty():
+        raise ScenarioError("the keyboard behaviour needs a terminal: start this peer from one")
+    arrows = {"A": "up", "B": "down", "C": "right", "D": "left"}
+    fd = sys.stdin.fileno()
+    saved = termios.tcgetattr(fd)
+
+    def read():
+        tty.setcbreak(fd)
+        try:
+            while True:
+                ch = sys.stdin.read(1)
+                if ch == "\x1b" and sys.stdin.read(1) == "[":
+                    ch = arrows.get(sys.stdin.read(1), "")
+                elif ch == " ":
+                    ch = "space"
+                if ch in ("q", "\x03", ""):
+                    break
+                behaviour.press(ch.lower())
+        finally:
+            termios.tcsetattr(fd, termios.TCSADRAIN, saved)
+
+    threading.Thread(target=read, daemon=True, name="keys").start()

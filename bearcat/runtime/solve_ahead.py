@@ -1,0 +1,157 @@
+"""Solve a scenario's game before its trials or peers start, or behind a
+live game that started on provisional sets.
+
+The ground station's guidance needs the game's winning sets; solved here,
+they are in the cache before the first trial or peer asks, so no game waits
+on a solve and a cache directory that refuses the write fails before
+anything else runs. The caller draws the progress (the CLI's bars).
+
+A live run need not wait for a large grid: its ground station may start
+on provisional sets, solved in seconds, while ``SolveBehind`` solves the
+game's own sets into the cache in a child process that runs only on a
+processor nothing else wants (Linux's SCHED_IDLE), so the game's peers
+keep the processor they need. The ground station takes those sets up once
+they are there.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import os
+import pickle
+import signal
+import sys
+import time
+from collections.abc import Callable
+
+Progress = Callable[[str, float, float, float], None]
+"""``progress(name, t, horizon, change)``, as the solvers report a set's solve."""
+
+
+def solve_ahead(scenario, netem: str, *, provisional: bool = False, progress: Progress | None = None) -> None:
+    """Build the ground station of ``scenario`` under profile ``netem`` once,
+    which solves (or loads) and caches what its guidance answers from. With
+    ``provisional``, a game whose sets are not cached gets provisional ones."""
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import build_cast
+
+    build_cast(
+        scenario,
+        load_profile(netem),
+        scenario.seed,
+        people=[],
+        ground=True,
+        ctf_progress=progress,
+        provisional=provisional,
+    )
+
+
+class SolveBehind:
+    """The ``awaited`` sets (``cast.AwaitedSets``) solved into the cache by
+    a child process on otherwise idle processors, from the moment it is made.
+    The child dies with this process. ``finish`` waits for it with a
+    progress bar; ``stop`` ends it, leaving the sets for another run."""
+
+    def __init__(self, awaited) -> None:
+        self.awaited = awaited
+        context = multiprocessing.get_context("spawn")  # the solver's threads do not survive a fork
+        self._where = context.Array("d", 4)  # set's place in the stages, game time reached, horizon, change
+        self._process = context.Process(
+            target=_solve_behind,
+            # Pickled here, unpickled after the child lowered its priority: loading
+            # the game imports the solvers, a second of work the peers starting
+            # beside it should not wait for.
+            args=(pickle.dumps(awaited.game), awaited.stages, self._where),
+            name=f"solve {awaited.game.grid_points}-point sets",
+            daemon=True,
+        )
+        self._process.start()
+
+    @property
+    def done(self) -> bool:
+        return not self._process.is_alive()
+
+    @property
+    def solved(self) -> bool:
+        """Whether the child ended having stored every set."""
+        return self.done and self._process.exitcode == 0
+
+    def finish(self, say: Callable[[str], None], progress: Progress | None = None) -> bool:
+        """Wait for the sets, reporting the game time solved to ``progress``
+        and telling ``say`` why; Ctrl-C stops the solve instead. Whether they
+        were solved."""
+        from bearcat.solvers.ctf import STAGES
+
+        if not self.done:
+            grid = self.awaited.game.grid_points
+            say(f"solving the {grid}-point sets so the next run starts on them (Ctrl-C leaves them for later)")
+            names = STAGES[self.awaited.stages]
+            try:
+                while not self.done:
+                    k, t, horizon, change = self._where[:]
+                    if horizon > 0 and progress is not None:
+                        progress(names[int(k)], t, horizon, change)
+                    time.sleep(0.2)
+            except KeyboardInterrupt:
+                self.stop()
+            if not self.solved:
+                say(f"the {grid}-point sets were left unsolved; the next run starts on provisional sets again")
+        return self.solved
+
+    def stop(self) -> None:
+        if not self.done:
+            self._process.terminate()
+        self._process.join()
+
+
+def compile_queries_behind():
+    """A child process, on otherwise idle processors, that fills numba's
+    cache with the guidance's query kernels (``ctf_queries.compile_kernels``)
+    while the launcher compiles and runs the solver on one processor, so a
+    ground station peer of a fresh clone loads them in a third of a second
+    instead of compiling them for two before it says it is up. Join it or
+    terminate it; it dies with this process in any case."""
+    context = multiprocessing.get_context("spawn")
+    process = context.Process(target=_compile_queries, name="compile the guidance's queries", daemon=True)
+    process.start()
+    return process
+
+
+def _compile_queries() -> None:
+    _idle()
+    from bearcat.solvers.ctf_queries import compile_kernels
+
+    compile_kernels()
+
+
+def _idle() -> None:
+    """Make this child run only on a processor nothing else wants (its
+    threads inherit the policy), leave Ctrl-C to the launcher, and die with it."""
+    if hasattr(os, "SCHED_IDLE"):
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    else:  # not Linux: the lowest priority there is
+        os.nice(19)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the launcher's to handle
+    from bearcat.netem.kernel.commands import die_with_parent
+
+    die_with_parent()
+
+
+def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
+    """The child's work: solve the game's ``stages`` into the cache, reporting
+    in ``where``, on idle processors only, so a peer never waits for it."""
+    _idle()
+    from bearcat.agents.ground_station.ctf_cache import load_or_solve
+    from bearcat.solvers.ctf import STAGES
+
+    game = pickle.loads(pickled_game)
+    names = STAGES[stages]
+
+    def report(name: str, t: float, horizon: float, change: float) -> None:
+        where[:] = [names.index(name), t, horizon, change]
+
+    try:
+        load_or_solve(game, stages, progress=report)
+    except Exception as exc:  # the game goes on without them; say why once
+        print(f"bearcat: the {game.grid_points}-point sets could not be solved: {exc}", file=sys.stderr)
+        sys.exit(1)

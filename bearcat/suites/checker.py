@@ -1,0 +1,498 @@
+"""The run checker: which invariants a run directory shows held, with the evidence.
+
+It reads only the directory (the event logs, the peers' logs, the outcome,
+the scenario the run played), so it judges runs it did not start, simulated
+or live, as Jepsen's checkers judge a history. Each invariant is held,
+broken, or does not apply to the run (``None``), with one line of evidence:
+
+- ``logs``: every event log parses to its last line, the outcome is there,
+  and every peer's log says how the peer ended;
+- ``reliable``: every reliable message (state, control, UAV tasks) reached
+  each peer that listens to its key, unless a fault had cut that peer off,
+  or it was sent before the peer first heard anything or after it stopped;
+- ``verdict``: the referee's verdict agrees with the truth track, and a
+  game ended by a gone player names a peer a fault hit;
+- ``detection``: a killed or stopped peer seen gone within ``KILL_SEEN`` s;
+  a pause, outage or partition that outlasted the lease seen within the
+  lease and ``SLACK`` s, and the peer back within ``REJOIN`` s of its end;
+  a player cut off gets guidance again within ``REJOIN`` s of the heal;
+- ``failsafe``: a UAV whose ground station vanished applied its failsafe
+  within its ``link_timeout``;
+- ``leftovers``: no process still runs from the run, and a kernel run left
+  neither its link nor its route in the host's namespace (a run that starts
+  right after may take the same names: check a run when it ends).
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import subprocess
+from dataclasses import dataclass
+from pathlib import Path
+
+import msgspec
+import numpy as np
+import shapely
+
+from bearcat.bus import keys
+from bearcat.bus.errors import BusError
+from bearcat.runtime.run_directory import SCENARIO
+from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER
+
+KILL_SEEN = 2.0  # s: a killed peer's TCP connection closes at once
+SLACK = 2.0  # s past the lease for a silent peer to be declared gone
+REJOIN = 10.0  # s for a peer to be seen again after its fault ends
+RELIABLE_KINDS = ("state", "control", "task")
+IN_FLIGHT = 2.0  # s before its receiver's last record a message must have arrived by
+WINDOW = 1.0  # s of truth before the verdict in which a capture must show
+ENDINGS = ("peer ", "vehicle ")
+INVARIANTS = ("logs", "reliable", "verdict", "detection", "failsafe", "leftovers")
+DETECTABLE = ("kill", "stop", "restart", "pause", "partition", "outage")
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One invariant: ``held`` True, False, or None where it does not apply."""
+
+    name: str
+    held: bool | None
+    evidence: str
+
+
+def check_run(directory: str | Path | Run) -> list[Finding]:
+    """Every invariant of the run in ``directory`` (or of a ``Run`` read already)."""
+    run = directory if isinstance(directory, Run) else Run(Path(directory))
+    return [
+        _logs(run),
+        _reliable(run),
+        _verdict(run),
+        _detection(run),
+        _failsafe(run),
+        _leftovers(run),
+    ]
+
+
+class Run:
+    """What a run directory recorded that the invariants judge, read once.
+
+    A long run's logs hold gigabytes (fifty phones at 10 Hz, each answered
+    with the positions of all fifty): only the events an invariant reads are
+    kept, and of what a receiver got only the reliable kinds and guidance,
+    with the span over which each receiver recorded anything."""
+
+    def __init__(self, directory: Path) -> None:
+        if not (directory / "events.jsonl").exists():
+            raise FileNotFoundError(f"{directory} is not a run directory: it has no events.jsonl")
+        self.directory = directory
+        self.torn: dict[str, int] = {}  # log -> line number of its first unreadable line
+        self.listening: dict[str, tuple[float, float]] = {}  # receiver -> first and last time it received
+        self.events = self._read(directory / "events.jsonl")
+        self.peer_logs = {p.stem: self._read(p) for p in sorted((directory / "peers").glob("*.jsonl"))}
+        self.outcome = self._outcome()
+        self.scenario = self._scenario()
+        self.live = (directory / "peers").is_dir()
+        self.kernel = (directory / "network.json").exists()
+        self.faults = [e for e in self.events if e["event"] == "fault"]
+        self.ended = {e["fault"]: e["t"] for e in self.events if e["event"] == "fault-end"}
+        self.seen = [e for e in self.events if e["event"] in ("gone", "alive")]
+        self._records = [e for log in self.peer_logs.values() for e in log] if self.peer_logs else self.events
+
+    def records(self) -> list[dict]:
+        """What the peers sent and received: their own logs in a live run, the one log in a simulated one."""
+        return self._records
+
+    def _read(self, path: Path) -> list[dict]:
+        events = []
+        decode = msgspec.json.Decoder().decode
+        with open(path, "rb") as f:
+            for n, line in enumerate(f, 1):
+                try:
+                    event = decode(line)
+                except msgspec.DecodeError:
+                    event = None
+                if not isinstance(event, dict) or "event" not in event:
+                    self.torn.setdefault(str(path.relative_to(self.directory)), n)
+                elif self._judged(event):
+                    events.append(event)
+        return events
+
+    def _judged(self, e: dict) -> bool:
+        """Whether an invariant reads ``e``; notes the span of what each receiver got."""
+        what = e["event"]
+        if what == "received":
+            receiver, t = e.get("receiver"), e.get("t", 0.0)
+            first, last = self.listening.get(receiver, (t, t))
+            self.listening[receiver] = (min(first, t), max(last, t))
+            return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "guidance")
+        if what == "sent":
+            return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "truth")
+        return what in ("did", "fault", "fault-end", "gone", "alive")
+
+    def _outcome(self) -> dict | None:
+        try:
+            return json.loads((self.directory / "outcome.json").read_text())
+        except (FileNotFoundError, json.JSONDecodeError):
+            return None
+
+    def _scenario(self):
+        from bearcat.scenarios.schema import ScenarioError, parse_scenario
+
+        path = self.directory / SCENARIO
+        if not path.exists():
+            return None
+        try:
+            return parse_scenario(path.read_text(encoding="utf-8"), source=str(path))
+        except ScenarioError:
+            return None
+
+
+# ---------------------------------------------------------------- the invariants
+
+
+def _logs(run: Run) -> Finding:
+    problems = [f"{name} is torn at line {n}" for name, n in run.torn.items()]
+    if run.outcome is None:
+        problems.append("outcome.json is missing or unreadable")
+    for log in sorted((run.directory / "peers").glob("*.log")):
+        lines = [line for line in log.read_text(errors="replace").splitlines() if line.strip()]
+        if not lines or not lines[-1].startswith(ENDINGS):
+            last = lines[-1][:80] if lines else "nothing"
+            problems.append(f"peers/{log.name} does not say how the peer ended (its last line: {last!r})")
+        elif any(line.startswith("Traceback") for line in lines):
+            problems.append(f"peers/{log.name} holds a traceback")
+    if problems:
+        return Finding("logs", False, "; ".join(problems))
+    logs = 1 + len(run.peer_logs)
+    return Finding("logs", True, f"{logs} event log(s) parse to the last line; the outcome is there")
+
+
+def _reliable(run: Run) -> Finding:
+    sent: dict[tuple[str, str], list[tuple[float, int]]] = {}
+    received: dict[tuple[str, str, str], set[int]] = {}
+    for e in run.records():
+        if e["event"] == "sent" and _kind(e["key"]) in RELIABLE_KINDS:
+            sent.setdefault((e["sender"], e["key"]), []).append((e["t"], e["message"].get("seq", 0)))
+        elif e["event"] == "received" and _kind(e["key"]) in RELIABLE_KINDS:
+            received.setdefault((e["sender"], e["receiver"], e["key"]), set()).add(e["seq"])
+    delivered = excused = 0
+    missing = []
+    for (sender, receiver, key), seqs in received.items():
+        first, last = run.listening.get(receiver, (math.inf, -math.inf))
+        for t, seq in sent.get((sender, key), []):
+            if t > last - IN_FLIGHT or t < first:
+                continue  # in flight when the receiver stopped recording, or sent before it listened
+            if seq in seqs:
+                delivered += 1
+            elif _cut_off(run, t, sender, receiver):
+                excused += 1
+            else:
+                missing.append(f"{key.rsplit('/', 1)[-1]} #{seq} from {sender} to {receiver} at {t:.1f}")
+    if missing:
+        more = f" and {len(missing) - 3} more" if len(missing) > 3 else ""
+        return Finding("reliable", False, f"never delivered: {'; '.join(missing[:3])}{more}")
+    if delivered == 0:
+        return Finding("reliable", None, "no reliable message was sent to a peer that recorded it")
+    return Finding("reliable", True, f"{delivered} delivered; {excused} lost to faults that cut their peer off")
+
+
+def _verdict(run: Run) -> Finding:
+    if run.outcome is None or run.scenario is None:
+        return Finding("verdict", None, "no outcome or no scenario.toml to judge it by")
+    reason, winner = run.outcome.get("reason", ""), run.outcome.get("winner")
+    ended = [e for e in run.events if e["event"] == "sent" and _kind(e["key"]) == "state"]
+    final = next((e["message"] for e in reversed(ended) if e["message"]["phase"] == "ended"), None)
+    if final is None:
+        if "fault[" in reason:
+            return Finding("verdict", True, f"the run ended without a verdict, and says why: {reason}")
+        return Finding("verdict", None, f"the game never ended ({reason})")
+    if final.get("judged_on") != "truth":
+        return Finding("verdict", None, "judged on fixes: there is no truth to check against")
+    reason, winner, t_end = final["reason"], final["winner"], final["t"]
+    track = _truth(run, t_end)
+    # A live referee hears the truth over the network, a sample earlier or
+    # later than the launcher logged it: grant each agent its longest step.
+    slack = {a: _longest_step(points) if run.live else 0.0 for a, points in track.items()}
+    s = run.scenario
+    if " is gone" in reason:
+        gone = reason.split(" is gone")[0].split()[-1]
+        fault = next((f for f in run.faults if gone in f.get("peers", [])), None)
+        if fault is None:
+            return Finding("verdict", False, f"{reason}, but no fault hit {gone}")
+        return Finding("verdict", True, f"{reason}: ended by fault[{fault['fault']}] ({fault['describe']})")
+    contest = _contest(s)
+    if "captured" in reason:
+        pairs = [(r, c) for r in contest.runners for c in contest.chasers if r in track and c in track]
+        if not pairs:
+            return Finding("verdict", False, f"{reason}, but the truth has no track of runner and chaser")
+        r, c = min(pairs, key=lambda pair: _closest(track[pair[0]], track[pair[1]]))
+        closest, allowed = _closest(track[r], track[c]), slack[r] + slack[c]
+        ok = closest <= contest.capture_radius + allowed + 0.05
+        granted = f", plus {allowed:.2f} m for one truth step of each" if allowed else ""
+        return Finding(
+            "verdict",
+            ok,
+            f"{reason}: the truth brings {r} and {c} within {closest:.2f} m "
+            f"in the last {WINDOW:g} s (capture radius {contest.capture_radius:g} m{granted})",
+        )
+    regions = dict((*contest.targets, *contest.forbidden))
+    if "returned the flag" in reason or "reached the" in reason or "entered the" in reason:
+        agent = reason.split()[0]
+        region = "home" if "returned the flag" in reason else reason.split(" the ")[-1].split()[0]
+        shape, where = regions.get(region), track.get(agent)
+        if shape is None or where is None:
+            return Finding("verdict", None, f"{reason}: no truth of {agent} or no region {region}")
+        inside = shape.distance(shapely.Point(where[-1][1])) <= slack[agent] + 0.05
+        return Finding("verdict", inside, f"{reason}: the truth puts {agent} {'in' if inside else 'outside'} {region}")
+    if "time limit" in reason:
+        ok = final["elapsed"] >= s.time_limit - 0.2
+        return Finding("verdict", ok, f"{reason}: {final['elapsed']:.1f} s of play, winner {winner}")
+    return Finding("verdict", None, f"the game ended with {reason!r}, which the truth cannot judge")
+
+
+def _detection(run: Run) -> Finding:
+    if not run.faults:
+        return Finding("detection", None, "no fault in this run")
+    lease = run.scenario.lease if run.scenario is not None else 10.0
+    said, broken = [], []
+    for fault in run.faults:
+        kind, t, peers = fault["kind"], fault["t"], fault.get("peers", [])
+        if kind in ("kill", "stop", "restart") and peers:
+            seen = _first(run, peers[0], "gone", t)
+            if seen is None or seen - t > KILL_SEEN:
+                broken.append(f"{kind} {peers[0]} at {t:.1f} s not seen gone within {KILL_SEEN:g} s")
+            else:
+                said.append(f"{kind} {peers[0]} seen gone after {seen - t:.2f} s")
+        lasted = _lasted(run, fault)
+        on_shim = kind in ("outage", "partition") and run.live and not run.kernel
+        if on_shim:
+            said.append(f"{kind} on the shim: its messages were cut, but no session could notice")
+        elif kind in ("pause", "outage", "partition") and lasted is not None and lasted >= lease:
+            watched = [p for p in peers if p != GROUND] or peers
+            seen = _first(run, watched[0], "gone", t)
+            if seen is None or seen - t > lease + SLACK:
+                broken.append(f"{kind} {watched[0]} at {t:.1f} s not seen gone within the lease ({lease:g} s)")
+            else:
+                said.append(f"{kind} {watched[0]} seen gone after {seen - t:.1f} s (lease {lease:g} s)")
+        end = run.ended.get(fault["fault"])
+        if kind in ("pause", "outage", "partition", "restart") and end is not None and peers:
+            watched = [p for p in peers if p != GROUND] or peers
+            game_over = _game_end(run)
+            gone = _first(run, watched[0], "gone", t)
+            was_gone = gone is not None and gone <= end + SLACK
+            back = _first(run, watched[0], "alive", end)
+            if on_shim:
+                pass
+            elif was_gone and back is None and (game_over is None or game_over > end + REJOIN):
+                broken.append(f"{watched[0]} not back within {REJOIN:g} s of the end of its {kind}")
+            elif was_gone and back is not None:
+                said.append(f"{watched[0]} back {back - end:.1f} s after its {kind} ended")
+            if kind in ("outage", "partition"):
+                fresh = _guided(run, watched, end)
+                guided = [p for p in watched if _guided(run, [p], -math.inf) is not None]
+                if fresh is not None and fresh - end <= REJOIN:
+                    said.append(f"guided again {fresh - end:.1f} s after the heal")
+                elif guided and (game_over is None or game_over > end + REJOIN):
+                    broken.append(f"{guided[0]} got no guidance within {REJOIN:g} s of the heal")
+    if broken:
+        return Finding("detection", False, "; ".join(broken))
+    return Finding("detection", True, "; ".join(said) or "no fault needed detecting")
+
+
+def _failsafe(run: Run) -> Finding:
+    if run.scenario is None or not run.scenario.uavs:
+        return Finding("failsafe", None, "no UAV in this run")
+    findings = []
+    for uav in run.scenario.uavs:
+        lost = _first_ground_loss(run, uav.id)
+        if lost is None:
+            continue
+        acted = next(
+            (e for e in run.records() if e["event"] == "did" and e["agent"] == uav.id and "failsafe" in e["what"]),
+            None,
+        )
+        if acted is None or acted["at"] - lost > uav.link_timeout + 0.5:
+            return Finding("failsafe", False, f"UAV {uav.id} lost its ground station at {lost:.1f} s and did nothing")
+        findings.append(f"{uav.id}: {acted['what']} after {acted['at'] - lost:.1f} s")
+    if not findings:
+        return Finding("failsafe", None, "no UAV lost its ground station")
+    return Finding("failsafe", True, "; ".join(findings))
+
+
+def _leftovers(run: Run) -> Finding:
+    if not run.live:
+        return Finding("leftovers", None, "a simulated run starts no process")
+    mine = str(run.directory.resolve())
+    left = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except OSError:
+            continue
+        if mine in cmdline and int(pid) != os.getpid():
+            left.append(f"{pid} ({cmdline[:60].strip()})")
+    left += _network_left(run)
+    if left:
+        return Finding("leftovers", False, f"left behind: {', '.join(left)}")
+    if run.kernel:
+        return Finding("leftovers", True, "no process, link or route of the run is left")
+    return Finding("leftovers", True, "no process of the run is left")
+
+
+def _network_left(run: Run) -> list[str]:
+    """The link and route a kernel run added to the host (``endpoint.json``), if still there.
+    The run's namespaces, and the packet rules inside them, end with their
+    last process: a process left is what would keep them."""
+    try:
+        added = json.loads((run.directory / "endpoint.json").read_text()).get("network") or {}
+    except (FileNotFoundError, json.JSONDecodeError):
+        return []
+    left = []
+    if added.get("link") and Path(f"/sys/class/net/{added['link']}").exists():
+        left.append(f"link {added['link']}")
+    if added.get("route"):
+        routes = subprocess.run(["ip", "-j", "-4", "route"], capture_output=True, text=True).stdout or "[]"
+        if any(r.get("dst") == added["route"] for r in json.loads(routes)):
+            left.append(f"route {added['route']}")
+    return left
+
+
+def detected_after(directory: str | Path | Run) -> dict[int, float]:
+    """Seconds from each fault that takes a peer away to the launcher seeing it gone, by fault index."""
+    run = directory if isinstance(directory, Run) else Run(Path(directory))
+    lease = run.scenario.lease if run.scenario is not None else 10.0
+    found = {}
+    for fault in run.faults:
+        peers = [p for p in fault.get("peers", []) if p != GROUND] or fault.get("peers", [])
+        if fault["kind"] in DETECTABLE and peers:
+            seen = _first(run, peers[0], "gone", fault["t"])
+            until = min(run.ended.get(fault["fault"], math.inf), fault["t"] + lease) + SLACK
+            if seen is not None and seen <= until:
+                found[fault["fault"]] = seen - fault["t"]
+    return found
+
+
+# ---------------------------------------------------------------- helpers
+
+
+def _kind(key: str) -> str | None:
+    try:
+        return keys.parse(key).kind
+    except BusError:
+        return None
+
+
+def _agent_of(key: str) -> str | None:
+    try:
+        return keys.parse(key).agent
+    except BusError:
+        return None
+
+
+def _cut_off(run: Run, t: float, *peers: str) -> bool:
+    """Whether a fault had one of ``peers`` (agent names) cut off at ``t``."""
+    lease = run.scenario.lease if run.scenario is not None else 10.0
+    names = {(GROUND if p in (*GROUND_AGENTS, LAUNCHER) else p) for p in peers}
+    for fault in run.faults:
+        start, end = fault["t"], run.ended.get(fault["fault"], math.inf)
+        hit = names & set(fault.get("peers", [])) or fault["kind"] == "partition"
+        if hit and start - 0.5 <= t <= end + lease:
+            return True
+    return False
+
+
+def _lasted(run: Run, fault: dict) -> float | None:
+    """How long a fault held: to its end, or to the end of the game if it outlived it."""
+    end = run.ended.get(fault["fault"], _game_end(run))
+    return None if end is None else end - fault["t"]
+
+
+def _first(run: Run, peer: str, what: str, after: float) -> float | None:
+    """When the launcher's side first saw a token of ``peer`` come (``alive``) or go, from ``after`` on."""
+    for e in run.seen:
+        agent = _agent_of(e["key"])
+        owner = GROUND if agent in GROUND_AGENTS else agent
+        if e["event"] == what and owner == peer and e["t"] >= after - 1e-9:
+            return e["t"]
+    return None
+
+
+def _guided(run: Run, peers: list[str], after: float) -> float | None:
+    """When one of ``peers`` first received guidance from ``after`` on."""
+    times = [
+        e["t"]
+        for e in run.records()
+        if e["event"] == "received" and e["receiver"] in peers and _kind(e["key"]) == "guidance" and e["t"] >= after
+    ]
+    return min(times, default=None)
+
+
+def _game_end(run: Run) -> float | None:
+    ended = [
+        e["t"]
+        for e in run.events
+        if e["event"] == "sent" and _kind(e["key"]) == "state" and e["message"]["phase"] == "ended"
+    ]
+    return min(ended) if ended else None
+
+
+def _first_ground_loss(run: Run, uav: str) -> float | None:
+    for fault in run.faults:
+        if GROUND in fault.get("peers", []) and fault["kind"] in ("kill", "stop", "restart", "pause", "partition"):
+            return fault["t"]
+        if uav in fault.get("peers", []) and fault["kind"] in ("partition", "outage"):
+            return fault["t"]
+    return None
+
+
+def _truth(run: Run, until: float) -> dict[str, list[tuple[float, np.ndarray]]]:
+    """Each agent's true positions (local metres, by log time) in the last ``WINDOW`` up to ``until``."""
+    game_map = run.scenario.map
+    track: dict[str, list] = {}
+    for e in run.events:
+        if e["event"] == "sent" and _kind(e["key"]) == "truth" and e["t"] <= until + 1e-9:
+            m = e["message"]
+            points = track.setdefault(m["agent"], [])
+            points.append((e["t"], np.array(game_map.to_local(m["lat"], m["lon"]))))
+            while len(points) > 2 and points[1][0] < until - WINDOW:
+                del points[0]
+    return track
+
+
+def _longest_step(points: list[tuple[float, np.ndarray]]) -> float:
+    return max((float(np.hypot(*(b - a))) for (_, a), (_, b) in itertools.pairwise(points)), default=0.0)
+
+
+def _closest(a: list[tuple[float, np.ndarray]], b: list[tuple[float, np.ndarray]]) -> float:
+    """How close two tracks came, each moving straight between its samples, over the time both span.
+
+    With a single sample each (a synchronous referee's last step is its
+    last two samples) this is the referee's own sweep.
+    """
+    if len(a) == 1 or len(b) == 1:
+        return float(min(np.hypot(*(p - q)) for _, p in a for _, q in b))
+    ta, pa = np.array([t for t, _ in a]), np.array([p for _, p in a])
+    tb, pb = np.array([t for t, _ in b]), np.array([p for _, p in b])
+    start, end = max(ta[0], tb[0]), min(ta[-1], tb[-1])
+    if end <= start:  # no overlap in time: the last step of each, as the referee swept them
+        return _swept(pa[-2:], pb[-2:])
+    times = np.unique(np.concatenate([[start, end], ta[(ta > start) & (ta < end)], tb[(tb > start) & (tb < end)]]))
+    at = np.column_stack([np.interp(times, ta, pa[:, i]) for i in range(2)])
+    bt = np.column_stack([np.interp(times, tb, pb[:, i]) for i in range(2)])
+    return min(_swept(at[k : k + 2], bt[k : k + 2]) for k in range(len(times) - 1))
+
+
+def _swept(a: np.ndarray, b: np.ndarray) -> float:
+    """The closest two points come moving straight from a[0], b[0] to a[1], b[1] together."""
+    d0, dd = a[0] - b[0], (a[1] - a[0]) - (b[1] - b[0])
+    s = 0.0 if not dd.any() else float(np.clip(-(d0 @ dd) / (dd @ dd), 0.0, 1.0))
+    return float(np.hypot(*(d0 + s * dd)))
+
+
+def _contest(scenario):
+    """What the referee of ``scenario`` judged by: radius, targets, forbidden regions."""
+    from bearcat.scenarios.cast import GAMES
+
+    return GAMES[scenario.game](scenario).referee().contest

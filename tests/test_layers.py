@@ -1,0 +1,71 @@
+"""The package's floors: every import, at module level or inside a
+function, points down (DESIGN.md), so the numerics never depend on the
+runners and a subpackage can be read without the ones above it."""
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parent.parent / "bearcat"
+
+FLOORS = {
+    "cli": 6,
+    "studies": 5,
+    "suites": 5,
+    "figures": 5,
+    "runtime": 4,
+    "scenarios": 3,
+    "agents": 2,
+    "bus": 1,
+    "netem": 1,
+    "solvers": 1,
+    "maps": 1,
+}
+"""The floor of each subpackage: an import may reach only a lower floor."""
+
+BESIDE = {("netem", "bus"), ("maps", "solvers"), ("maps", "bus")}
+"""The arrows allowed between subpackages of one floor: netem reads the bus's
+message types, maps rasterizes to the solvers' grid and checks its files with
+the bus's typed validation."""
+
+
+def arrows() -> set[tuple[str, str, str]]:
+    """Each (importing subpackage, imported subpackage, importing file)."""
+    found = set()
+    for path in PACKAGE.rglob("*.py"):
+        parts = path.relative_to(PACKAGE).parts
+        if len(parts) < 2:
+            continue  # bearcat/__init__.py and __main__.py stand above every floor
+        source = parts[0]
+        for node in ast.walk(ast.parse(path.read_text(), str(path))):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                names = [node.module]
+            elif isinstance(node, ast.Import):
+                names = [alias.name for alias in node.names]
+            else:
+                continue
+            for name in names:
+                dotted = name.split(".")
+                if dotted[0] == "bearcat" and len(dotted) > 1 and dotted[1] != source:
+                    found.add((source, dotted[1], str(path.relative_to(PACKAGE))))
+    return found
+
+
+def test_every_subpackage_has_a_floor():
+    folders = {p.name for p in PACKAGE.iterdir() if (p / "__init__.py").is_file()}
+    assert folders == set(FLOORS)
+
+
+def test_every_import_points_down():
+    upward = sorted(
+        f"{where} imports bearcat.{target}"
+        for source, target, where in arrows()
+        if FLOORS[target] >= FLOORS[source] and (source, target) not in BESIDE
+    )
+    assert upward == []
+
+
+def test_the_floors_are_all_used():
+    """The graph is as deep as the design draws it: a floor nothing imports
+    from above would mean a subpackage drifted out of its place."""
+    reached = {FLOORS[target] for _, target, _ in arrows()}
+    assert reached == set(range(1, 6))
