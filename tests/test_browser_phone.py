@@ -15,7 +15,6 @@ import os
 import re
 import shutil
 import time
-from pathlib import Path
 
 import pytest
 
@@ -24,12 +23,9 @@ from bearcat.runtime.launch import free_port
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import start_launcher
 from tests.support.scenario_files import write_scenario
+from tests.support.system import CHROMIUM, missing_chromium
 
-playwright = pytest.importorskip("playwright.sync_api")
-CHROMIUM = shutil.which("chromium") and "/usr/lib/chromium/chromium"
-pytestmark = pytest.mark.skipif(
-    not (CHROMIUM and Path(CHROMIUM).exists()), reason="needs Debian's chromium (apt-get install chromium)"
-)
+pytestmark = pytest.mark.skipif(missing_chromium() is not None, reason=str(missing_chromium()))
 
 HEADING = 330.0  # degrees the phone's top edge points to, through the orientation sensor
 START = (25.0, 22.0)  # the attacker's start in the scenario
@@ -64,8 +60,10 @@ def played(tmp_path_factory):
                 break
         else:
             pytest.fail(f"the launcher printed no link: {''.join(said)}")
-        with playwright.sync_playwright() as p:
-            browser = p.chromium.launch(executable_path=CHROMIUM, args=["--no-sandbox"])
+        from playwright import sync_api
+
+        with sync_api.sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
             context = browser.new_context(
                 geolocation=geo(START),
                 permissions=["geolocation", "accelerometer", "gyroscope", "magnetometer"],

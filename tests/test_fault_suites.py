@@ -5,9 +5,7 @@ plugin's fixtures."""
 from __future__ import annotations
 
 import json
-import os
 import re
-import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -17,6 +15,7 @@ import pytest
 from bearcat.cli.main import main
 from bearcat.scenarios.faults import KINDS, FaultError
 from bearcat.suites.suite import builtin_suite, load_suite
+from tests.support.system import missing_kernel_network
 
 
 def test_the_builtin_suite_covers_every_fault_kind_against_the_three_games():
@@ -55,7 +54,7 @@ def test_the_builtin_suite_holds_live(tmp_path):
 
 
 @pytest.mark.xdist_group("kernel")
-@pytest.mark.skipif(os.geteuid() != 0 or shutil.which("iptables") is None, reason="kernel mode needs root and iptables")
+@pytest.mark.skipif(missing_kernel_network() is not None, reason=str(missing_kernel_network()))
 def test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed(tmp_path):
     done = subprocess.run(
         [

@@ -14,6 +14,7 @@ import pytest
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
 from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
+from tests.support.system import missing_iptables
 
 GAME = "g"
 PAYLOAD = b"p" * 500
@@ -95,7 +96,7 @@ def counted(port: int):
         subprocess.run(["iptables", "-X", chain], capture_output=True)
 
 
-@pytest.mark.skipif(os.geteuid() != 0, reason="counting packets by protocol needs iptables, which needs root")
+@pytest.mark.skipif(missing_iptables() is not None, reason=f"counting packets by protocol {missing_iptables()}")
 def test_fixes_travel_over_udp_and_state_over_tcp():
     with star("udp") as (endpoint, sender, receiver):
         got = []

@@ -20,8 +20,12 @@ from scipy import ndimage
 from bearcat.agents.ground_station.rerun_recording import AREA, BLUE, RED, REGIONS
 from bearcat.maps import load_map
 from tests.support.scenario_files import write_scenario
+from tests.support.system import missing_vulkan
 
-pytestmark = pytest.mark.skipif(shutil.which("rerun") is None, reason="the Rerun viewer is not installed")
+pytestmark = [
+    pytest.mark.skipif(shutil.which("rerun") is None, reason="needs the Rerun viewer: pip install rerun-sdk"),
+    pytest.mark.skipif(missing_vulkan() is not None, reason=str(missing_vulkan())),
+]
 
 FIELD = load_map("field-50")  # 50 m x 50 m, the return strip y 45-50 m, the flag disk at (25, 15) m
 TOLERANCE = 1.5  # m between a marker's centre in the picture and where its agent was
