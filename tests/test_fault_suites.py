@@ -1,6 +1,6 @@
 """Fault-injection suites as a user runs them: the built-in suite in both
-runtimes, a suite of one's own from the README's example, and the pytest
-plugin's fixtures."""
+runtimes, a suite of one's own from the fault-injection page's example,
+and the pytest plugin's fixtures."""
 
 from __future__ import annotations
 
@@ -77,9 +77,9 @@ def test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed(tmp_
     assert added["link"].startswith("bcat") and added["route"].startswith("198.1")
 
 
-README = (Path(__file__).resolve().parent.parent / "README.md").read_text()
-SUITE = re.search(r"\*\*Suites\.\*\*.*?```toml\n(.*?)```", README, flags=re.S).group(1)
-"""The README's example suite, as a user would copy it."""
+FAULTS_PAGE = (Path(__file__).resolve().parent.parent / "docs" / "faults.md").read_text()
+SUITE = re.search(r"\*\*Suites\.\*\*.*?```toml\n(.*?)```", FAULTS_PAGE, flags=re.S).group(1)
+"""The example suite of the fault-injection page, as a user would copy it."""
 
 
 def test_a_suite_of_ones_own_runs_with_one_command_and_fails_when_an_expectation_does(tmp_path, capsys):
