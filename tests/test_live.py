@@ -536,7 +536,7 @@ PROVISIONAL = """
 name = "provisional"
 map = "field-50"
 game = "ctf"
-time_limit = 25.0
+time_limit = 35.0  # the 25-point solve runs on idle processors only: long enough for it on a busy two-core host
 netem = "ideal"
 
 [rules]
