@@ -195,7 +195,9 @@ def peers_of(tmp_path: Path) -> list[int]:
     return [int(pid) for pid in found.split()]
 
 
-@pytest.mark.skipif(shutil.which("setpriv") is None, reason="needs setpriv to drop the capabilities: apt-get install util-linux")
+@pytest.mark.skipif(
+    shutil.which("setpriv") is None, reason="needs setpriv to drop the capabilities: apt-get install util-linux"
+)
 def test_without_the_capabilities_kernel_mode_is_one_sentence_before_anything_starts(tmp_path):
     run = subprocess.run(
         ["setpriv", "--bounding-set=-sys_admin,-net_admin", "--inh-caps=-sys_admin,-net_admin"]

@@ -69,3 +69,31 @@ def test_the_floors_are_all_used():
     from above would mean a subpackage drifted out of its place."""
     reached = {FLOORS[target] for _, target, _ in arrows()}
     assert reached == set(range(1, 6))
+
+
+def test_no_command_module_imports_another():
+    """What two commands share lives in the CLI's helpers (arguments, output,
+    progress, writing, presolve), so each command reads on its own."""
+    from bearcat.cli.main import COMMANDS
+
+    modules = {module for names, _ in COMMANDS.values() for module in names}
+    reaching = sorted(
+        f"cli/{module}.py imports bearcat.cli.{name}"
+        for module in modules
+        for name in imported_from_cli(PACKAGE / "cli" / f"{module}.py")
+        if name in modules
+    )
+    assert reaching == []
+
+
+def imported_from_cli(path: Path) -> set[str]:
+    """The modules of ``bearcat.cli`` that ``path`` imports, however it spells it."""
+    names = set()
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.ImportFrom) and node.module == "bearcat.cli":
+            names.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom) and (node.module or "").startswith("bearcat.cli."):
+            names.add(node.module.split(".")[2])
+        elif isinstance(node, ast.Import):
+            names.update(a.name.split(".")[2] for a in node.names if a.name.startswith("bearcat.cli."))
+    return names

@@ -87,3 +87,23 @@ def check_seeds(first: int, count: int) -> None:
     """Seeds ``first`` to ``first + count - 1`` must all be seeds."""
     if first + count - 1 > MAX_SEED:
         raise UsageError(f"--seed {first} with {count} trials runs past the largest seed, {MAX_SEED}")
+
+
+class Commands:
+    """The sub-commands the command modules register into: ``add_parser`` as
+    argparse's, and ``games(command)`` for the GAME choices of a command
+    (``solve``, ``play``) that several modules add games to, made by
+    whichever asks first, so no command module imports another."""
+
+    def __init__(self, subparsers: argparse._SubParsersAction) -> None:
+        self._subparsers = subparsers
+        self._games: dict[str, argparse._SubParsersAction] = {}
+
+    def add_parser(self, name: str, **options) -> argparse.ArgumentParser:
+        return self._subparsers.add_parser(name, **options)
+
+    def games(self, command: str) -> argparse._SubParsersAction:
+        if command not in self._games:
+            parser = self.add_parser(command)
+            self._games[command] = parser.add_subparsers(dest="game", metavar="GAME", required=True)
+        return self._games[command]

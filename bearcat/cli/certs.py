@@ -10,9 +10,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bearcat.cli.arguments import Commands
 
-def register(subparsers) -> None:
-    certs = subparsers.add_parser(
+
+def register(commands: Commands) -> None:
+    certs = commands.add_parser(
         "certs",
         description="Make and list the certificates of a game's peers: an authority, and one certificate per "
         "peer whose common name is the peer's id (bearcat run --certs DIR --secure).",

@@ -10,13 +10,14 @@ from __future__ import annotations
 from dataclasses import asdict
 from pathlib import Path
 
+from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 
 MARKS = {True: "held", False: "BROKEN", None: "n/a"}
 
 
-def register(subparsers) -> None:
-    check = subparsers.add_parser(
+def register(commands: Commands) -> None:
+    check = commands.add_parser(
         "check",
         description="Read a run directory (bearcat run --out, bearcat simulate --out DIR/seed-S) and say which "
         "invariants held: logs complete, reliable messages delivered, the verdict agrees with the truth, "

@@ -21,7 +21,6 @@ from bearcat.agents.ground_station.ctf_cache import (
     unresolved_capture,
 )
 from bearcat.cli import arguments
-from bearcat.cli import maneuver as maneuver_command
 from bearcat.cli.output import Output, add_json_option
 from bearcat.cli.progress import solve_bars
 from bearcat.cli.writing import writing
@@ -101,9 +100,9 @@ def add_game_options(parser: argparse.ArgumentParser) -> None:
     game.add_argument("--no-cache", action="store_true", help="solve afresh and store nothing")
 
 
-def register_solve(games) -> None:
-    """``solve ctf``, under the ``solve`` command's games."""
-    parser = games.add_parser(
+def register(commands: arguments.Commands) -> None:
+    """``solve ctf``, ``query ctf`` and ``play ctf``."""
+    parser = commands.games("solve").add_parser(
         "ctf",
         help="1 vs 1 capture-the-flag: HJI winning sets, cached for queries",
         description="Solve the flag-return set R_A, the flag-capture set F_A or the two-stage winning set W_A "
@@ -114,17 +113,12 @@ def register_solve(games) -> None:
         "--local",
         action="store_true",
         help="update only a narrow band around the front: the same sets and time-to-win, with the defender's "
-        "margins clamped a few cells out (see the README's benchmarks)",
+        "margins clamped a few cells out (see the benchmarks page of the docs)",
     )
     add_json_option(parser, "a summary")
     parser.set_defaults(run=run_solve)
 
-
-def register(subparsers) -> None:
-    """``query ctf`` and ``play ctf``."""
-    query = subparsers.add_parser("query")
-    query_games = query.add_subparsers(dest="game", metavar="GAME", required=True)
-    q = query_games.add_parser(
+    q = commands.games("query").add_parser(
         "ctf",
         help="winner, margin, optimal headings and the opponent's winning region at a state",
         description="Guidance for the current positions, as the phones of thesis 3.5 showed it. "
@@ -169,9 +163,7 @@ def register(subparsers) -> None:
     add_json_option(q, "the answer")
     q.set_defaults(run=run_query)
 
-    playing = subparsers.add_parser("play")
-    play_games = playing.add_subparsers(dest="game", metavar="GAME", required=True)
-    p = play_games.add_parser(
+    p = commands.games("play").add_parser(
         "ctf",
         help="both players follow the optimal strategies from a start state (thesis 3.4, Fig. 3.4-3.5)",
         description="Closed-loop simulation: each player follows the heading of eqs. 3.12-3.13, the attacker "
@@ -182,7 +174,6 @@ def register(subparsers) -> None:
     p.add_argument("--plot", type=Path, metavar="PNG", help="draw the start's winning region and both tracks")
     add_json_option(p, "the tracks and outcome")
     p.set_defaults(run=run_play)
-    maneuver_command.register_play(play_games)
 
 
 def _confidence(text: str) -> float:

@@ -16,6 +16,7 @@ from dataclasses import asdict
 from pathlib import Path
 
 from bearcat.cli import arguments
+from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import writing
@@ -26,8 +27,8 @@ from bearcat.studies.pursuit_experiment import PursuitSetup, run_trial, summaris
 DEFAULT_DOMAINS = ("square-10", "triangle-10", "maze-10")
 
 
-def register(subparsers) -> None:
-    experiment = subparsers.add_parser("experiment")
+def register(commands: Commands) -> None:
+    experiment = commands.add_parser("experiment")
     kinds = experiment.add_subparsers(dest="experiment", metavar="EXPERIMENT", required=True)
     p = kinds.add_parser(
         "pursuit",

@@ -17,14 +17,14 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import asdict
 from pathlib import Path
 
-from bearcat.cli.arguments import UsageError
+from bearcat.cli.arguments import Commands, UsageError
 from bearcat.cli.writing import make_directory, writing
 from bearcat.runtime.peers import NETWORKS
 from bearcat.runtime.run_directory import fresh
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser(
+def register(commands: Commands) -> None:
+    p = commands.add_parser(
         "faults",
         description="Run every case of a fault-injection suite (TOML: [[case]] tables of a scenario, faults and "
         "seeds) and check each run's invariants; 'builtin' is the suite that ships with bearcat.",

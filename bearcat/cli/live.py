@@ -7,6 +7,7 @@ from contextlib import nullcontext
 from pathlib import Path
 
 from bearcat.cli import arguments
+from bearcat.cli.arguments import Commands
 from bearcat.cli.presolve import await_behind, presolve
 from bearcat.cli.writing import make_directory, writing
 from bearcat.runtime.peers import NETWORKS
@@ -16,8 +17,8 @@ from bearcat.scenarios.faults import GROUND, load_faults
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
 
 
-def register(subparsers) -> None:
-    run = subparsers.add_parser(
+def register(commands: Commands) -> None:
+    run = commands.add_parser(
         "run",
         description="Start the ground station and one walker peer per agent as processes on this host, wait "
         "for all of them, start the game, and stop every peer when it ends (or on Ctrl-C, or when a peer dies).",
@@ -95,7 +96,7 @@ def register(subparsers) -> None:
     run.add_argument("--headless", action="store_true", help="no viewer (the default)")
     run.set_defaults(run=run_live)
 
-    view = subparsers.add_parser(
+    view = commands.add_parser(
         "view",
         description="Open RUN/recording.rrd in the Rerun viewer (made from RUN/events.jsonl if missing), "
         "or save a picture of it at a game time.",
@@ -117,7 +118,7 @@ def register(subparsers) -> None:
     )
     view.set_defaults(run=run_view)
 
-    peer = subparsers.add_parser(
+    peer = commands.add_parser(
         "peer",
         description="Start one peer of a scenario: the ground station (referee, guidance and UAV tasking), one "
         "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
@@ -215,7 +216,7 @@ def register(subparsers) -> None:
     _page_arguments(peer, listen="--page")
     peer.set_defaults(run=run_peer)
 
-    phone = subparsers.add_parser(
+    phone = commands.add_parser(
         "phone",
         description="Let a person play from a real phone: serve a page to the phone's browser over HTTPS and "
         "bridge it to the game (its GPS and compass as fixes, the ground station's guidance on its screen). "

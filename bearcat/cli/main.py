@@ -18,30 +18,35 @@ import logging
 import sys
 
 from bearcat import __version__
+from bearcat.cli import arguments
 from bearcat.cli.arguments import UsageError
 from bearcat.cli.writing import WriteError
 
-#: Each command, the module of ``bearcat.cli`` that registers and runs
-#: it, and its line in ``bearcat --help``, in the order that help lists them.
+#: Each command, the modules of ``bearcat.cli`` that register and run it
+#: (several, for a command whose games they share), and its line in
+#: ``bearcat --help``, in the order that help lists them.
 COMMANDS = {
-    "maps": ("maps", "list and show maps"),
-    "solve": ("solve", "run a solver once on a map"),
-    "query": ("ctf", "ask a solved game about a state"),
-    "play": ("ctf", "play a solved game or a designed maneuver out in closed loop"),
-    "experiment": ("experiment", "run a batch of trials"),
-    "simulate": ("simulate", "play a scenario in virtual time, every peer in this process"),
-    "run": ("live", "play a scenario live: every peer its own process over Zenoh"),
-    "view": ("live", "replay a run's Rerun recording"),
-    "check": ("check", "say which invariants a run directory shows held"),
-    "faults": ("faults", "run a fault-injection suite and check every run"),
-    "peer": ("live", "start one peer by hand (a person at a keyboard, or against real hardware)"),
-    "phone": ("live", "let a person play from a real phone's browser"),
-    "certs": ("certs", "make the certificates a guarded game's peers present"),
+    "maps": (("maps",), "list and show maps"),
+    "solve": (("solve", "ctf", "maneuver"), "run a solver once on a map"),
+    "query": (("ctf",), "ask a solved game about a state"),
+    "play": (("ctf", "maneuver"), "play a solved game or a designed maneuver out in closed loop"),
+    "experiment": (("experiment",), "run a batch of trials"),
+    "simulate": (("simulate",), "play a scenario in virtual time, every peer in this process"),
+    "run": (("live",), "play a scenario live: every peer its own process over Zenoh"),
+    "view": (("live",), "replay a run's Rerun recording"),
+    "check": (("check",), "say which invariants a run directory shows held"),
+    "faults": (("faults",), "run a fault-injection suite and check every run"),
+    "peer": (("live",), "start one peer by hand (a person at a keyboard, or against real hardware)"),
+    "phone": (("live",), "let a person play from a real phone's browser"),
+    "certs": (("certs",), "make the certificates a guarded game's peers present"),
     "study": (
-        "study",
+        ("study",),
         "the fake-out, go/no-go and UAV search studies of thesis 3.5 and 6.2.4, as batches of simulated games",
     ),
-    "vehicle": ("vehicle", "run a MAVLink vehicle emulator that MAVSDK and ground stations take for a PX4 quadrotor"),
+    "vehicle": (
+        ("vehicle",),
+        "run a MAVLink vehicle emulator that MAVSDK and ground stations take for a PX4 quadrotor",
+    ),
 }
 
 
@@ -94,7 +99,9 @@ def build_parser(command: str | None = None) -> argparse.ArgumentParser:
         for name, (_, summary) in COMMANDS.items():
             subparsers.add_parser(name, help=summary, add_help=False)
     else:
-        importlib.import_module(f"bearcat.cli.{COMMANDS[command][0]}").register(subparsers)
+        commands = arguments.Commands(subparsers)
+        for module in COMMANDS[command][0]:
+            importlib.import_module(f"bearcat.cli.{module}").register(commands)
     return parser
 
 

@@ -51,9 +51,9 @@ def _maneuver_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("--no-cache", action="store_true", help="solve afresh and store nothing")
 
 
-def register_solve(games) -> None:
-    """``solve maneuver``, under the ``solve`` command's games."""
-    parser = games.add_parser(
+def register(commands: arguments.Commands) -> None:
+    """``solve maneuver`` and ``play maneuver``."""
+    parser = commands.games("solve").add_parser(
         "maneuver",
         help="a maneuver's capture and avoid sets and its sequencing checks (thesis 6.1)",
         description="Solve the capture sets RA_T(T_k) of each mode, the forward reach of the motors' turn-off "
@@ -64,10 +64,7 @@ def register_solve(games) -> None:
     add_json_option(parser, "the checks and horizons")
     parser.set_defaults(run=run_solve)
 
-
-def register_play(games) -> None:
-    """``play maneuver``, under the ``play`` command's games."""
-    parser = games.add_parser(
+    parser = commands.games("play").add_parser(
         "maneuver",
         help="fly a designed maneuver many times, switching by its sets and at fixed times",
         description="Fly the full planar model of eq. 6.3 under random disturbances, switching modes as the "

@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
+from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 from bearcat.maps import Map, list_maps, load_map
 
 
-def register(subparsers) -> None:
-    parser = subparsers.add_parser(
-        "maps", description="List the built-in maps, or show one as text, JSON or a picture."
-    )
-    commands = parser.add_subparsers(dest="maps_command", metavar="SUBCOMMAND", required=True)
+def register(commands: Commands) -> None:
+    parser = commands.add_parser("maps", description="List the built-in maps, or show one as text, JSON or a picture.")
+    actions = parser.add_subparsers(dest="maps_command", metavar="SUBCOMMAND", required=True)
 
-    listing = commands.add_parser("list", help="one line per built-in map")
+    listing = actions.add_parser("list", help="one line per built-in map")
     listing.set_defaults(run=run_list)
 
-    show = commands.add_parser("show", help="describe a map, print it as JSON or draw it")
+    show = actions.add_parser("show", help="describe a map, print it as JSON or draw it")
     show.add_argument("map", metavar="NAME_OR_PATH", help="a built-in map name or a GeoJSON file")
     show.add_argument("-o", "--output", metavar="PNG", help="draw the map into this PNG file")
     show.add_argument(

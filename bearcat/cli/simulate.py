@@ -20,6 +20,7 @@ from pathlib import Path
 
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.cli import arguments
+from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 from bearcat.cli.presolve import presolve
 from bearcat.cli.writing import make_directory, writing
@@ -29,8 +30,8 @@ from bearcat.scenarios.faults import load_faults
 from bearcat.scenarios.schema import TRANSPORTS, list_scenarios, load_scenario
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser(
+def register(commands: Commands) -> None:
+    p = commands.add_parser(
         "simulate",
         description="Play a scenario with every peer in one process, in virtual time, through the same "
         f"codec and network emulation as a live run. Built-in scenarios: {', '.join(list_scenarios())}.",

@@ -15,8 +15,6 @@ from pathlib import Path
 import numpy as np
 
 from bearcat.cli import arguments
-from bearcat.cli import ctf as ctf_command
-from bearcat.cli import maneuver as maneuver_command
 from bearcat.cli.output import Output, add_json_option
 from bearcat.maps import Map, MapError, Raster, load_map, rasterize
 from bearcat.solvers.openloop import Defender, OpenLoopSolution, solve_openloop
@@ -69,10 +67,9 @@ def defender_spec(text: str) -> tuple[float, float, float]:
     return values[0], values[1], speed
 
 
-def register(subparsers) -> None:
-    solve = subparsers.add_parser("solve")
-    games = solve.add_subparsers(dest="game", metavar="GAME", required=True)
-    openloop = games.add_parser(
+def register(commands: arguments.Commands) -> None:
+    """``solve openloop``; ``cli.ctf`` and ``cli.maneuver`` add the other games."""
+    openloop = commands.games("solve").add_parser(
         "openloop",
         help="1-vs-many open-loop reach-avoid: safe-reachable sets and a guaranteed-safe path",
         description=(
@@ -126,8 +123,6 @@ def register(subparsers) -> None:
     openloop.add_argument("--plot", type=Path, metavar="PNG", help="write a figure of the sets and path")
     add_json_option(openloop, "the result")
     openloop.set_defaults(run=run_openloop)
-    ctf_command.register_solve(games)
-    maneuver_command.register_solve(games)
 
 
 def stage_speeds(args, stages: int) -> list[float]:

@@ -14,6 +14,7 @@ import json
 from pathlib import Path
 
 from bearcat.cli import arguments
+from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import make_directory, writing
@@ -21,8 +22,8 @@ from bearcat.scenarios.schema import TRANSPORTS
 from bearcat.studies.thesis import STUDIES
 
 
-def register(subparsers) -> None:
-    p = subparsers.add_parser(
+def register(commands: Commands) -> None:
+    p = commands.add_parser(
         "study",
         description=" ".join(f"{name}: {study.description}." for name, study in STUDIES.items()),
     )

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from bearcat.cli.arguments import UsageError, seed
+from bearcat.cli.arguments import Commands, UsageError, seed
 
 
-def register(subparsers) -> None:
-    vehicle = subparsers.add_parser(
+def register(commands: Commands) -> None:
+    vehicle = commands.add_parser(
         "vehicle",
         description="Emulate one PX4 quadrotor on MAVLink over UDP: a point mass with acceleration, speed and "
         "climb limits, optional wind and a draining battery. By PX4 SITL's convention vehicle i sends to "
