@@ -329,13 +329,16 @@ def run_view(args) -> int:
 
 
 def _open_viewer(rrd: Path, *extra: str) -> int:
+    """The Rerun viewer on ``rrd``; its server (which it starts with every window) on the loopback only."""
     import shutil
     import subprocess
+
+    from bearcat.figures.screenshot import LOOPBACK
 
     viewer = shutil.which("rerun")
     if viewer is None:
         raise FileNotFoundError("the Rerun viewer is not installed: pip install rerun-sdk")
-    return subprocess.call([viewer, str(rrd), *extra])
+    return subprocess.call([viewer, str(rrd), "--bind", LOOPBACK, *extra])
 
 
 def run_peer(args) -> int:
