@@ -130,7 +130,7 @@ def register(subparsers) -> None:
         help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station",
     )
     peer.add_argument(
-        "--id", default="gs", metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
+        "--id", default=GROUND, metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
     )
     peer.add_argument(
         "--connect",
