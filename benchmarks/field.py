@@ -26,6 +26,10 @@ of the ground station as a router over ``tls/`` with mutual TLS and the
 access control list (``bus.access``); the echo then goes over TLS too.
 Targets: p99 under 20 ms with 10 phones and no fix unanswered; ``simulate``
 at least 50x faster than real time for a 1 vs 1 game with 10 Hz guidance.
+
+Each result is printed as it is measured. SIGTERM (or Ctrl-C) stops the
+benchmark at once: the run under way is dropped, its phones are stopped,
+and what is printed is what finished.
 """
 
 from __future__ import annotations
@@ -35,6 +39,7 @@ import asyncio
 import contextlib
 import json
 import random
+import signal
 import subprocess
 import sys
 import tempfile
@@ -47,6 +52,36 @@ import numpy as np
 GAME = "bench"
 START_KEY = "bench/start"
 STARTUP = 120.0  # s for every phone to come up
+STOP_WAIT = 5.0  # s a phone has to go on SIGTERM before it is killed
+
+
+class Interrupted(Exception):
+    """SIGTERM or SIGINT: the benchmark stops, and its phones with it."""
+
+
+def _stop_on_sigterm() -> None:
+    """Make SIGTERM unwind the benchmark as Ctrl-C does, so that every phone
+    is stopped on the way out. Called again after each ``asyncio.run``: the
+    ground station's peer takes SIGTERM for its loop, and the loop puts the
+    default action (death, leaving the phones behind) back as it closes."""
+    signal.signal(signal.SIGTERM, _interrupt)
+
+
+def _interrupt(signum, frame) -> None:
+    raise Interrupted(f"stopped by {signal.Signals(signum).name}")
+
+
+def _stop(procs: list[subprocess.Popen]) -> None:
+    """Stop every phone still running: SIGTERM, then SIGKILL."""
+    for p in procs:
+        if p.poll() is None:
+            p.terminate()
+    for p in procs:
+        try:
+            p.wait(timeout=STOP_WAIT)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
 
 
 def phone(args) -> None:
@@ -211,27 +246,37 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False, s
                     *(["--certs", str(certs)] if certs else []),
                 ]
 
-            if kernel:
-                procs = [
-                    network.spawn(pid, command(pid, f"{scheme}/{network.router}:{port}"), log_file=subprocess.DEVNULL)
-                    for pid in ids
-                ]
-            else:
-                procs = [subprocess.Popen(command(pid, endpoint)) for pid in ids]
-
             async def serve():
                 task = asyncio.create_task(run_peer([service], session, GAME))
                 deadline = time.monotonic() + STARTUP
-                while sum("/phone/" in k for k in seen) < n and time.monotonic() < deadline:
+                while sum("/phone/" in k for k in seen) < n and time.monotonic() < deadline and not task.done():
                     await asyncio.sleep(0.05)
                 echo.put(START_KEY, b"")
-                await asyncio.sleep(duration + 12.0)
+                await asyncio.wait([task], timeout=duration + 12.0)
                 task.cancel()
-                await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
+                (why,) = await asyncio.gather(task, return_exceptions=True)  # let the peer close its session
+                # The peer takes SIGTERM and SIGINT for itself, and ends on them: the benchmark was told to stop.
+                if isinstance(why, str) and why.startswith("interrupted"):
+                    raise Interrupted(f"stopped: the ground station was {why}")
+                if isinstance(why, Exception):
+                    raise why
 
-            asyncio.run(serve())
-            for p in procs:
-                p.wait(timeout=60)
+            procs: list[subprocess.Popen] = []
+            try:
+                for pid in ids:
+                    if kernel:
+                        at = f"{scheme}/{network.router}:{port}"
+                        procs.append(network.spawn(pid, command(pid, at), log_file=subprocess.DEVNULL))
+                    else:
+                        procs.append(subprocess.Popen(command(pid, endpoint)))
+                try:
+                    asyncio.run(serve())
+                finally:
+                    _stop_on_sigterm()
+                for p in procs:
+                    p.wait(timeout=60)
+            finally:
+                _stop(procs)
             results = [json.loads(Path(f"{tmp}/{pid}.json").read_text()) for pid in ids]
         echoing.undeclare()
     lat = np.concatenate([r["latencies"] for r in results]) * 1e3
@@ -250,11 +295,11 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False, s
     }
 
 
-def simulate_speed(games: int) -> list[dict]:
+def simulate_speed(games: int):
+    """One row per scenario, each as soon as it is measured."""
     from bearcat.runtime.simulate import simulate
     from bearcat.scenarios.schema import load_scenario
 
-    rows = []
     for name in ("fake-out-aided-defender", "fake-out", "go-no-go"):
         scenario = load_scenario(name)
         simulate(scenario, seed=0)  # the solve and the first compiles are not what is timed
@@ -264,11 +309,22 @@ def simulate_speed(games: int) -> list[dict]:
             outcome = simulate(scenario, seed=seed)
             wall += time.perf_counter() - t
             game += outcome.elapsed
-        rows.append({"scenario": name, "games": games, "game_s": game, "wall_s": wall, "speedup": game / wall})
-    return rows
+        yield {"scenario": name, "games": games, "game_s": game, "wall_s": wall, "speedup": game / wall}
 
 
 def main() -> None:
+    args = arguments().parse_args()
+    if args.phone:
+        return phone(args)
+    _stop_on_sigterm()
+    try:
+        measure(args)
+    except (Interrupted, KeyboardInterrupt) as stop:
+        why = str(stop) or "stopped by SIGINT"
+        raise SystemExit(f"field.py: {why}; the results printed are those that finished") from None
+
+
+def arguments() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     parser.add_argument("--phones", type=int, nargs="+", default=[10, 50])
     parser.add_argument("--duration", type=float, default=20.0, help="seconds of fixes per phone")
@@ -294,19 +350,22 @@ def main() -> None:
     parser.add_argument("--connect", help=argparse.SUPPRESS)
     parser.add_argument("--warmup", type=float, default=3.0, help=argparse.SUPPRESS)
     parser.add_argument("--out", help=argparse.SUPPRESS)
-    args = parser.parse_args()
-    if args.phone:
-        return phone(args)
+    return parser
+
+
+def measure(args) -> None:
     if not args.latency_only:
-        print("simulate, in-process virtual time (target: >= 50x real time)")
+        print("simulate, in-process virtual time (target: >= 50x real time)", flush=True)
         for r in simulate_speed(args.games):
             print(
                 f"  {r['scenario']:<26} {r['games']} games, {r['game_s']:7.1f} s of play in {r['wall_s']:6.2f} s: "
-                f"{r['speedup']:6.1f}x real time"
+                f"{r['speedup']:6.1f}x real time",
+                flush=True,
             )
     if not args.simulate_only:
         print(
-            "fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)"
+            "fix -> guidance over Zenoh on loopback, 10 Hz per phone, ideal network (target: p99 < 20 ms at 10 phones)",
+            flush=True,
         )
         runs = [(n, args.mode, False, False) for n in args.phones]
         runs += [(n, "client", True, False) for n in args.phones] if args.kernel else []
@@ -320,7 +379,8 @@ def main() -> None:
                 f"{r['unanswered']} unanswered; "
                 f"latency p50 {r['p50_ms']:.2f} ms, p99 {r['p99_ms']:.2f} ms; "
                 f"bare Zenoh echo p50 {r['echo_p50_ms']:.2f} ms, p99 {r['echo_p99_ms']:.2f} ms "
-                f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)"
+                f"(ratio p50 {r['p50_ms'] / r['echo_p50_ms']:.1f}x, p99 {r['p99_ms'] / r['echo_p99_ms']:.1f}x)",
+                flush=True,
             )
 
 

@@ -78,8 +78,19 @@ def first_game(scenario: str, cold: bool, wait: bool) -> dict[str, float]:
         seen["gs up"] = warmed[0] - epoch
         sent = [e for e in events if e["event"] == "sent"]
         begun = min(e["t"] for e in sent if e["key"].endswith("/state") and e["message"]["phase"] == "running")
-        answers = [e for e in sent if "/guidance/" in e["key"] and e["message"]["value"] is not None and e["t"] > begun]
-        seen["first answer ms"] = (answers[0]["t"] - answers[0]["message"]["t"]) * 1e3 if answers else float("nan")
+        # The ground station's log says when it sent each guidance; the launcher's holds its body.
+        bodies = {
+            (e["key"], e["message"].get("seq")): e["message"]
+            for e in read_events(f"{scratch}/run/events.jsonl")
+            if e["event"] == "sent" and "/guidance/" in e["key"]
+        }
+        answers = [
+            (e["t"], m)
+            for e in sent
+            if "/guidance/" in e["key"] and e["t"] > begun
+            if (m := bodies.get((e["key"], e["seq"]))) is not None and m["value"] is not None
+        ]
+        seen["first answer ms"] = (answers[0][0] - answers[0][1]["t"]) * 1e3 if answers else float("nan")
         return seen
 
 

@@ -347,3 +347,24 @@ def test_a_flood_from_zenoh_threads_wakes_a_busy_loop_once_and_loses_nothing():
     assert len(wakeups) == 1
     assert [k for s, k in seen if s == "a"] == [k for k in range(5000) if k != 3]
     assert [k for s, k in seen if s == "b"] == [k for k in range(5000) if k != 3]
+
+
+def test_the_ground_stations_peer_name_is_spelled_once():
+    """Its one definition is in the bus, the lowest floor that every user
+    of it may import: no other module of the package writes ``"gs"``
+    (scenario and fault files, data, may)."""
+    import ast
+    from pathlib import Path
+
+    package = Path(keys.__file__).resolve().parent.parent
+    spelled = [
+        f"{path.relative_to(package.parent)}:{node.lineno}"
+        for path in sorted(package.rglob("*.py"))
+        for node in ast.walk(ast.parse(path.read_text(), str(path)))
+        if isinstance(node, ast.Constant) and node.value == "gs"
+    ]
+    assert spelled == [f"bearcat/bus/keys.py:{_line_of(Path(keys.__file__), 'GROUND = ')}"]
+
+
+def _line_of(path, text: str) -> int:
+    return next((n for n, line in enumerate(path.read_text().splitlines(), 1) if line.startswith(text)), None)

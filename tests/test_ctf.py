@@ -430,16 +430,53 @@ def test_sets_solved_by_other_solver_code_miss_the_cache(game, tmp_path, monkeyp
     the old code stored: the key holds a hash of the solvers' source."""
     load_or_solve(game, "both", root=tmp_path)
     assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "cache", "win": "cache"}
-    source = tmp_path / "src"
-    (source / "solvers").mkdir(parents=True)
-    (source / "solvers" / "hji.py").write_text("DEFAULT_CFL = 0.75\n")
-    before = ctf_cache._fingerprint((source / "solvers",))
-    (source / "solvers" / "hji.py").write_text("DEFAULT_CFL = 0.9\n")
-    ctf_cache._fingerprint.cache_clear()
-    after = ctf_cache._fingerprint((source / "solvers",))
+    before = _fingerprint_of(tmp_path / "before", SOLVER)
+    after = _fingerprint_of(tmp_path / "after", SOLVER.replace("0.75", "0.9"))
     assert before != after and before.split(" source ")[0] == after.split(" source ")[0]
     monkeypatch.setattr(ctf_cache, "solver_fingerprint", lambda: after)
     assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "solved", "win": "solved"}
+
+
+SOLVER = '''"""A solver module as a reader sees it."""
+
+# The Courant number of the scheme.
+DEFAULT_CFL = 0.75
+
+
+def step(u, dt):
+    """One step of the scheme."""
+    return u - DEFAULT_CFL * dt * u  # explicit Euler
+'''
+
+
+def _fingerprint_of(root, text: str) -> str:
+    """The fingerprint of a solvers/ package under ``root`` holding one module, ``text``."""
+    (root / "solvers").mkdir(parents=True)
+    (root / "solvers" / "hji.py").write_text(text)
+    return ctf_cache._fingerprint((root / "solvers",))
+
+
+@pytest.mark.parametrize(
+    "change, kept",
+    [
+        (("# The Courant number of the scheme.", "# The CFL number: see chapter 3.\n# Kept below one."), True),
+        (("  # explicit Euler", ""), True),
+        (('"""One step of the scheme."""', '"""One step of the scheme, forward in time,\n    of length dt."""'), True),
+        (('"""A solver module as a reader sees it."""', '"""A solver module, documented anew."""'), True),
+        (("DEFAULT_CFL = 0.75", "DEFAULT_CFL = 0.76"), False),
+        (("u - DEFAULT_CFL", "u + DEFAULT_CFL"), False),
+        (("return u - DEFAULT_CFL * dt * u", "return max(u - DEFAULT_CFL * dt * u, 0.0)"), False),
+    ],
+    ids=["comment", "trailing-comment", "docstring", "module-docstring", "number", "operator", "call"],
+)
+def test_the_solver_fingerprint_follows_the_code_not_its_comments_or_docstrings(tmp_path, change, kept):
+    """A comment or docstring changed in a solver solves no game again; a
+    number or a line of code changed does."""
+    old, new = change
+    assert old in SOLVER
+    before = _fingerprint_of(tmp_path / "before", SOLVER)
+    after = _fingerprint_of(tmp_path / "after", SOLVER.replace(old, new))
+    assert (before == after) is kept
 
 
 def test_the_flag_return_stage_is_shared_through_the_cache(game, tmp_path):

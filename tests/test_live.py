@@ -18,6 +18,7 @@ import subprocess
 import sys
 import threading
 import time
+from collections import Counter
 from contextlib import closing
 from pathlib import Path
 
@@ -82,8 +83,38 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
     # once, so the game's first fixes do not wait for numba to load its code.
     gs = read_events(out / "peers" / "gs.jsonl")
     warmed = [e["t"] for e in gs if e["event"] == "warmed"]
-    running = min(e["t"] for e in gs if e["event"] == "sent" and e["message"].get("phase") == "running")
+    running = min(e["t"] for e in gs if e["event"] == "sent" and e.get("message", {}).get("phase") == "running")
     assert len(warmed) == 1 and warmed[0] < running, (warmed, running)
+
+
+def test_a_live_run_logs_each_guidance_body_once(tmp_path):
+    """The launcher's run-wide log (what the recording and the checker read)
+    holds every guidance the ground station sent; the ground station's own
+    log says it sent each (key, number, size) without its body again, and
+    no peer's text log copies one either. Ground stations answering fifty
+    phones wrote every body twice, gigabytes each."""
+    from bearcat.suites.checker import check_run
+
+    launcher, out, _ = start_run(tmp_path, time_limit=6.0)
+    output, _ = launcher.communicate(timeout=180)
+    assert launcher.returncode == 0, output
+    bodies: Counter = Counter()
+    for log in (out / "events.jsonl", *sorted((out / "peers").glob("*.jsonl"))):
+        for e in read_events(log):
+            if e["event"] == "sent" and e.get("message", {}).get("type") == "guidance":
+                bodies[(e["sender"], e["key"], e["message"]["seq"])] += 1
+    gs = read_events(out / "peers" / "gs.jsonl")
+    sent = [e for e in gs if e["event"] == "sent" and "/guidance/" in e["key"]]
+    numbers = {(e["sender"], e["key"], e.get("seq", e.get("message", {}).get("seq"))) for e in sent}
+    assert len(numbers) == len(sent) > 20  # ten a second to each of two players
+    assert {k: n for k, n in bodies.items() if n != 1} == {} and set(bodies) == numbers
+    assert all(e["size"] > 0 for e in sent)
+    for text in sorted((out / "peers").glob("*.log")):
+        assert '"reports"' not in text.read_text() and "Guidance(" not in text.read_text(), text
+    # What the checker and the recording read is all still there.
+    findings = {f.name: f.held for f in check_run(out)}
+    assert findings["logs"] and findings["reliable"] and findings["verdict"], findings
+    assert (out / "recording.rrd").stat().st_size > 0
 
 
 def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(tmp_path):
@@ -590,9 +621,9 @@ def test_a_run_whose_sets_are_not_cached_starts_on_provisional_ones_and_takes_it
     record = read_events(out / "peers" / "gs.jsonl")
     notes = [(e["grid"], e["awaited"], e["t"]) for e in record if e["event"] == "sets"]
     assert [note[:2] for note in notes] == [(21, 25), (25, None)], notes
-    ended = min(e["t"] for e in record if e["event"] == "sent" and e["message"].get("phase") == "ended")
+    ended = min(e["t"] for e in record if e["event"] == "sent" and e.get("message", {}).get("phase") == "ended")
     taken_up = notes[1][2]
     assert taken_up < ended
-    assert any(e["t"] > taken_up and e["message"]["type"] == "guidance" for e in record if e["event"] == "sent")
+    assert any(e["t"] > taken_up and "/guidance/" in e["key"] for e in record if e["event"] == "sent")
     assert cached(awaited.game, awaited.stages) is not None
     assert peers_of(path) == []

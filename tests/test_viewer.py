@@ -8,9 +8,14 @@ own (its notices, its top bar) over the views."""
 from __future__ import annotations
 
 import json
+import os
 import shutil
+import socket
 import subprocess
 import sys
+import threading
+import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -18,6 +23,8 @@ from matplotlib.image import imread
 from scipy import ndimage
 
 from bearcat.agents.ground_station.rerun_recording import AREA, BLUE, RED, REGIONS
+from bearcat.cli import live as cli_live
+from bearcat.figures import screenshot
 from bearcat.maps import load_map
 from tests.support.scenario_files import write_scenario
 from tests.support.system import missing_vulkan
@@ -177,3 +184,115 @@ def test_a_time_after_the_end_or_without_a_picture_is_refused_in_one_sentence(ru
     assert done.returncode == 2 and "--at needs --screenshot" in done.stderr
     done = bearcat("view", run, "--screenshot", tmp_path / "x.png", "--at", -1)
     assert done.returncode == 2 and "--at" in done.stderr
+
+
+# ---------------------------------------------------------------- where the viewer listens
+
+
+def listening(port: int) -> set[str]:
+    """The addresses something on this host listens on at TCP ``port``, read from /proc/net/tcp and tcp6."""
+    found = set()
+    for table, family in (("/proc/net/tcp", socket.AF_INET), ("/proc/net/tcp6", socket.AF_INET6)):
+        try:
+            rows = Path(table).read_text().splitlines()[1:]
+        except FileNotFoundError:
+            continue
+        for row in rows:
+            local, state = row.split()[1], row.split()[3]
+            address, at = local.split(":")
+            if state == "0A" and int(at, 16) == port:  # 0A: LISTEN
+                raw = bytes.fromhex(address)
+                if sys.byteorder == "little":  # the kernel prints each 32-bit word in host order
+                    raw = b"".join(raw[k : k + 4][::-1] for k in range(0, len(raw), 4))
+                found.add(socket.inet_ntop(family, raw))
+    return found
+
+
+def heard(port: int, running, timeout: float = 60.0) -> set[str]:
+    """Where ``port`` is listened on, once it is, while ``running()``; empty if it never was."""
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        if found := listening(port):
+            return found
+        if not running():
+            return listening(port)
+        time.sleep(0.01)
+    return set()
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def tiny(tmp_path_factory):
+    """A recording of one point at one game time."""
+    import rerun as rr
+
+    path = tmp_path_factory.mktemp("tiny") / "recording.rrd"
+    rec = rr.RecordingStream("bearcat-tiny")
+    rec.save(path)
+    rec.set_time(screenshot.TIMELINE, duration=1.0)
+    rec.log("ground/point", rr.Points2D([[0.0, 0.0]]))
+    rec.flush()
+    return path
+
+
+def test_the_headless_viewer_of_a_screenshot_listens_on_the_loopback_only(tiny, tmp_path, monkeypatch):
+    """``bearcat view RUN --screenshot`` starts a viewer whose gRPC server
+    (Rerun binds every interface unless told) answers this host only: asked
+    for it on its command line, and seen in the kernel's table of listening
+    sockets while it runs (it binds before it renders, so also where it
+    cannot render)."""
+    command = screenshot.viewer_command("rerun", tiny, 9876, (320, 240))
+    assert command[command.index("--bind") + 1] == "127.0.0.1"
+    port = free_port()
+    monkeypatch.setattr(screenshot, "_free_port", lambda: port)
+    taking = threading.Thread(
+        target=lambda: _quietly(screenshot.screenshot, tiny, tmp_path / "shot.png", size=(320, 240)), daemon=True
+    )
+    taking.start()
+    try:
+        assert heard(port, taking.is_alive) == {"127.0.0.1"}
+    finally:
+        taking.join(timeout=90)
+
+
+def test_the_viewer_bearcat_view_opens_listens_on_the_loopback_only(tiny, monkeypatch):
+    """``bearcat view RUN`` opens a viewer, which starts a server with its
+    window: on the loopback only. The socket is looked at with the same
+    command run headless, which stays up where there is no display (a
+    viewer without one exits some 50 ms after it binds, too soon to be
+    seen every time)."""
+    asked = []
+    monkeypatch.setattr(subprocess, "call", lambda command: asked.append(command) or 0)
+    port = free_port()
+    assert cli_live._open_viewer(tiny, "--port", str(port)) == 0
+    (command,) = asked
+    assert command[command.index("--bind") + 1] == "127.0.0.1"
+    viewer = subprocess.Popen(
+        [*command, "--headless"],
+        env=dict(os.environ, RUST_LOG="error", RERUN_APP_ONLY="true"),
+        stdin=subprocess.DEVNULL,
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
+    try:
+        assert heard(port, lambda: viewer.poll() is None) == {"127.0.0.1"}
+    finally:
+        try:
+            os.killpg(viewer.pid, 9)
+        except ProcessLookupError:
+            pass
+        viewer.wait()
+
+
+def _quietly(take, *args, **kwargs) -> None:
+    """``take(...)``, whether or not this host's viewer can render (what is tested is where it listened)."""
+    try:
+        take(*args, **kwargs)
+    except (ChildProcessError, TimeoutError):
+        pass

@@ -28,6 +28,9 @@ from bearcat.bus.errors import BusError
 ROOT = "bearcat"
 ROLES = ("walker", "phone", "ground-station", "uav", "referee", "recorder", "launcher")
 
+GROUND = "gs"
+"""The ground station's peer name (its referee, guidance and UAV tasking run in it), defined here only."""
+
 NAME_PATTERN = r"^[A-Za-z0-9_-]{1,64}$"
 """Every game, agent and peer name: one key chunk, safe in a file name, 64 characters at most."""
 _NAME = re.compile(NAME_PATTERN)

@@ -78,7 +78,7 @@ def watches(role: str, name: str, game: str) -> list[str]:
     """The liveliness key expressions ``name`` in ``role`` may watch in ``game``."""
     if role in ("launcher", "ground-station", "uav"):
         return [keys.every(game, "alive")]
-    return [keys.alive(game, "ground-station", "gs")]
+    return [keys.alive(game, "ground-station", keys.GROUND)]
 
 
 def _own(game: str, kind: str, name: str) -> str:

@@ -131,7 +131,7 @@ def register(commands: Commands) -> None:
         help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station",
     )
     peer.add_argument(
-        "--id", default="gs", metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
+        "--id", default=GROUND, metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
     )
     peer.add_argument(
         "--connect",
@@ -330,13 +330,16 @@ def run_view(args) -> int:
 
 
 def _open_viewer(rrd: Path, *extra: str) -> int:
+    """The Rerun viewer on ``rrd``; its server (which it starts with every window) on the loopback only."""
     import shutil
     import subprocess
+
+    from bearcat.figures.screenshot import LOOPBACK
 
     viewer = shutil.which("rerun")
     if viewer is None:
         raise FileNotFoundError("the Rerun viewer is not installed: pip install rerun-sdk")
-    return subprocess.call([viewer, str(rrd), *extra])
+    return subprocess.call([viewer, str(rrd), "--bind", LOOPBACK, *extra])
 
 
 def run_peer(args) -> int:

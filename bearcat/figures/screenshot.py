@@ -1,7 +1,9 @@
 """A picture of a run's Rerun recording at a chosen game time, taken by a
 headless Rerun viewer.
 
-The viewer runs as a child process on a free port and is driven through
+The viewer runs as a child process on a free port of the loopback (its
+server answers this machine only: Rerun binds every interface unless told
+otherwise) and is driven through
 ``rerun.experimental.ViewerClient``: wait for the recording, hide the
 viewer's own panels, pause the time line at the chosen time and save what
 the views show. Its log is cut to errors, since the viewer shows its log as
@@ -23,6 +25,7 @@ from pathlib import Path
 TIMELINE = "game_time"
 PANELS = ("/top_panel", "/blueprint_panel", "/selection_panel")
 SETTLE_FRAMES = 20  # pictures at most until two agree
+LOOPBACK = "127.0.0.1"  # the only address the viewer's server listens on
 STARTUP = 60.0  # s for the viewer to start and load the recording (a software rasteriser on a loaded host is slow)
 
 
@@ -37,7 +40,7 @@ def screenshot(rrd: Path, png: Path, *, at: float | None = None, size: tuple[int
     if viewer is None:
         raise FileNotFoundError("the Rerun viewer is not installed: pip install rerun-sdk")
     port = _free_port()
-    command = [viewer, str(rrd), "--headless", "--port", str(port), "--window-size", f"{size[0]}x{size[1]}"]
+    command = viewer_command(viewer, rrd, port, size)
     environment = dict(os.environ, RUST_LOG="error", RERUN_APP_ONLY="true")
     with tempfile.TemporaryFile() as errors:
         # Its own session, so stopping it stops the viewer binary the ``rerun`` launcher starts too.
@@ -61,6 +64,12 @@ def screenshot(rrd: Path, png: Path, *, at: float | None = None, size: tuple[int
             _stop(process)
 
 
+def viewer_command(viewer: str, rrd: Path, port: int, size: tuple[int, int]) -> list[str]:
+    """The command line of a headless viewer of ``rrd`` whose server listens on ``port`` of the loopback only."""
+    window = f"{size[0]}x{size[1]}"
+    return [viewer, str(rrd), "--headless", "--bind", LOOPBACK, "--port", str(port), "--window-size", window]
+
+
 def _wait_for_recording(port: int, process: subprocess.Popen, errors, rrd: Path):
     """Wait until the viewer shows the recording; a client of the viewer, and
     where the recording's time line ends (s)."""
@@ -77,7 +86,7 @@ def _wait_for_recording(port: int, process: subprocess.Popen, errors, rrd: Path)
                 f"(it needs a Vulkan driver, such as Mesa's for a CPU): {why}"
             )
         try:
-            client = ViewerClient.connect(f"rerun+http://127.0.0.1:{port}/proxy")
+            client = ViewerClient.connect(f"rerun+http://{LOOPBACK}:{port}/proxy")
             state = client.get_state()
         except ConnectionError:  # not listening yet
             time.sleep(0.1)
@@ -116,5 +125,5 @@ def _stop(process: subprocess.Popen) -> None:
 
 def _free_port() -> int:
     with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
+        s.bind((LOOPBACK, 0))
         return s.getsockname()[1]

@@ -135,5 +135,6 @@ class Dispatcher:
             self._told[agent.name] = len(did)
         session = self._sessions[agent.name]
         for s in sends:
-            self.record.sent(self.now(), session.name, s.key, s.message)
-            session.put(s.key, encode(s.message), reliable=keys.reliable(s.key))
+            payload = encode(s.message)
+            self.record.sent(self.now(), session.name, s.key, s.message, size=len(payload))
+            session.put(s.key, payload, reliable=keys.reliable(s.key))

@@ -21,7 +21,8 @@ launcher prints the command to run, and waits.
 The launcher's own session records every message of the game it sees into
 ``events.jsonl``; each peer writes what it sent and received, what its
 network shim did to the messages it received and its agents' failures into
-``peers/NAME.jsonl``, and its log into ``peers/NAME.log``. The outcome counts
+``peers/NAME.jsonl`` (the ground station's guidance without its body, which
+``events.jsonl`` holds: ``live.BODILESS``), and its log into ``peers/NAME.log``. The outcome counts
 the failures of each agent from those logs.
 
 A fault plan is kept in the run directory (``faults.toml``), handed to every

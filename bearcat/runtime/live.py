@@ -32,6 +32,7 @@ import signal
 import threading
 import time
 from contextlib import closing
+from pathlib import Path
 
 from bearcat.agents.ground_station.ctf_cache import cached
 from bearcat.agents.ground_station.event_log import EventLog
@@ -52,6 +53,11 @@ LINGER = 1.0  # s a peer stays up after the game ended
 POLL = 0.1
 AWAIT_POLL = 1.0  # s between looks in the cache for the sets a ground station awaits
 SHUTDOWN_WAIT = 2.0  # s a UAV peer waits, on its way out, for a vehicle that does not answer
+BODILESS = ("guidance",)
+"""Kinds of key whose messages a peer's own log records without their body
+when the run directory has the launcher's run-wide log (``events.jsonl``):
+the launcher, on the ground station's side of every cut, logs every
+guidance in full, so the ground station's log only says it sent each."""
 
 
 async def run_peer(
@@ -244,6 +250,12 @@ async def run_peer(
     return why["reason"]
 
 
+def _run_wide(out) -> Path | None:
+    """The launcher's run-wide event log in run directory ``out``, if it has one."""
+    path = None if out is None else Path(out) / "events.jsonl"
+    return path if path is not None and path.exists() else None
+
+
 def start_peer(
     role: str,
     scenario,
@@ -348,6 +360,8 @@ def start_peer(
         from bearcat.runtime.recovery import resume as take_up
 
         last = last_sent(f"{out}/peers/{name}.jsonl")
+        if _run_wide(out):  # what the peer's own log left to the launcher's
+            last = last_sent(_run_wide(out), sender=name, kinds=BODILESS) | last
         for agent in agents:
             take_up(agent, last, scenario.name)
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
@@ -359,7 +373,13 @@ def start_peer(
     if mode == "client" and listen is None:
         listen = []  # a client does not listen
     with (
-        closing(EventLog(None if out is None else f"{out}/peers/{name}.jsonl", append=True)) as record,
+        closing(
+            EventLog(
+                None if out is None else f"{out}/peers/{name}.jsonl",
+                append=True,
+                bodiless=BODILESS if _run_wide(out) else (),
+            )
+        ) as record,
         ZenohSession(
             name,
             config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=credentials if secure else None),

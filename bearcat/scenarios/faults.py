@@ -41,12 +41,11 @@ from typing import Annotated, Literal
 import msgspec
 from msgspec import Meta
 
+from bearcat.bus.keys import GROUND
 from bearcat.bus.messages import Name
 from bearcat.bus.validation import Invalid, convert
 from bearcat.netem.profiles import load_profiles
 
-GROUND = "gs"
-"""The ground station's peer name (referee, guidance and UAV tasking run in it)."""
 GROUND_AGENTS = (GROUND, "referee", "uav-tasking")
 """The agents the ground station's process holds: the guidance service, the referee and the UAV tasking."""
 LAUNCHER = "launcher"

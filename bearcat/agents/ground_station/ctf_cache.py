@@ -9,7 +9,8 @@ capture radius and horizon that set depends on, the scheme, tolerance and
 precision, the file format, and the code that solves it
 (``solver_fingerprint``); W_A's key includes R_A's.
 So two games that share a flag-return stage share its file, and any change
-to the inputs misses the cache rather than loading a stale answer. The
+to the inputs misses the cache rather than loading a stale answer (a change
+to a solver's comments or docstrings alone does not). The
 directory is safe to delete; a damaged entry is logged and solved again.
 
 A set whose value holds NaN or infinities (a solver that overflowed), or
@@ -21,6 +22,7 @@ is solved again, since the cache holds nothing a new solve cannot restore.
 
 from __future__ import annotations
 
+import ast
 import contextlib
 import fcntl
 import functools
@@ -304,10 +306,12 @@ def _flaw(value: np.ndarray, time_to_win: np.ndarray | None) -> str | None:
 
 def solver_fingerprint() -> str:
     """What cached numbers depend on besides their inputs: the package
-    version, numpy's and numba's, and a hash of the source of the solvers
-    and of the map geometry. A checkout that changes a solver between two
-    releases (an editable install after a pull) then misses the cache
-    instead of loading sets the old code solved."""
+    version, numpy's and numba's, and a hash of the code of the solvers
+    and of the map geometry (every module of both: whatever a solve may
+    run). A checkout that changes a solver between two releases (an
+    editable install after a pull) then misses the cache instead of
+    loading sets the old code solved; one that changes only comments or
+    docstrings keeps it."""
     return _fingerprint(tuple(Path(p.__file__).parent for p in (bearcat.solvers, bearcat.maps)))
 
 
@@ -320,8 +324,30 @@ def _fingerprint(packages: tuple[Path, ...]) -> str:
     source = hashlib.sha256()
     for package in packages:
         for path in sorted(package.rglob("*.py")):
-            source.update(path.relative_to(package.parent).as_posix().encode() + b"\0" + path.read_bytes())
+            code = _code(path)
+            source.update(path.relative_to(package.parent).as_posix().encode() + b"\0" + code.encode() + b"\0")
     return f"{version} numpy {np.__version__} numba {numba.__version__} source {source.hexdigest()[:16]}"
+
+
+def _code(path: Path) -> str:
+    """What module ``path`` does, without what only its reader sees: its
+    syntax tree, which holds no comments and no line numbers, with every
+    string that stands alone as a statement (docstrings) taken out."""
+    tree = ast.parse(path.read_bytes(), str(path))
+    for node in ast.walk(tree):
+        for field in ("body", "orelse", "finalbody"):
+            statements = getattr(node, field, None)
+            if isinstance(statements, list) and any(_is_text(s) for s in statements):
+                setattr(node, field, [s for s in statements if not _is_text(s)] or [ast.Pass()])
+    return ast.dump(tree)
+
+
+def _is_text(statement: ast.AST) -> bool:
+    return (
+        isinstance(statement, ast.Expr)
+        and isinstance(statement.value, ast.Constant)
+        and isinstance(statement.value.value, str)
+    )
 
 
 def _load(path: Path, shape: tuple[int, ...], quiet: bool = False) -> SetSolution | None:

@@ -1,7 +1,11 @@
 """The event log of a run: one JSON line per thing that happened to a message.
 
-``sent`` lines carry the whole message; ``received`` lines say who got which
-message when; ``impaired`` lines say what the network did (delivered late
+``sent`` lines carry the whole message, except in a log told to leave the
+bodies of some kinds of key to another (``bodiless``: a live ground
+station's own log leaves its guidance to the launcher's run-wide log, which
+holds them all), whose ``sent`` lines of those kinds carry the message's
+number (``seq``) and its size on the wire instead; ``received`` lines say
+who got which message when; ``impaired`` lines say what the network did (delivered late
 and by how much, duplicated, dropped and why, held in a dead zone), so an
 analysis can tell a late fix from a lost one; ``outcome`` closes the log.
 Lines are written as they happen, each with one system call, so a run that
@@ -21,6 +25,7 @@ from pathlib import Path
 
 import msgspec
 
+from bearcat.bus import keys
 from bearcat.bus.messages import Message
 from bearcat.netem.shim import Impairment
 
@@ -31,10 +36,12 @@ class EventLog:
     """Appends to ``path`` (JSON lines); with ``path`` None it only counts.
     ``last`` keeps the latest message sent on each key, what a peer
     restarted mid-game resumes from. A peer's log is opened to ``append``,
-    so a restarted peer's log keeps what its first life recorded."""
+    so a restarted peer's log keeps what its first life recorded. What is
+    sent on the kinds of key in ``bodiless`` is logged without its body."""
 
-    def __init__(self, path: str | Path | None = None, *, append: bool = False) -> None:
+    def __init__(self, path: str | Path | None = None, *, append: bool = False, bodiless: tuple[str, ...] = ()) -> None:
         self.path = None if path is None else Path(path)
+        self.bodiless = frozenset(bodiless)
         self.counts: dict[str, int] = {}
         self.last: dict[str, Message] = {}
         self.lost = 0  # lines the disk refused
@@ -47,8 +54,13 @@ class EventLog:
             self._fd = os.open(self.path, mode, 0o644)
             self._size = os.fstat(self._fd).st_size
 
-    def sent(self, t: float, sender: str, key: str, message: Message) -> None:
+    def sent(self, t: float, sender: str, key: str, message: Message, size: int | None = None) -> None:
+        """``message`` went out on ``key``; ``size``: its payload's bytes, where known."""
         self.last[key] = message
+        if self.bodiless and keys.parse(key).kind in self.bodiless:
+            seq = getattr(message, "seq", None)
+            self._write({"event": "sent", "t": t, "sender": sender, "key": key, "seq": seq, "size": size})
+            return
         self._write({"event": "sent", "t": t, "sender": sender, "key": key, "message": msgspec.to_builtins(message)})
 
     def received(self, t: float, sender: str, receiver: str, key: str, seq: int | None = None) -> None:

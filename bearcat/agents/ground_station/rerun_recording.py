@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from bearcat.agents.ground_station.event_log import iter_events
+from bearcat.bus.keys import GROUND
 from bearcat.maps import Map
 
 log = logging.getLogger(__name__)
@@ -157,7 +158,7 @@ def write_recording(
                 if m["agent"] not in phones:
                     phones.append(m["agent"])
                 _log_screen(rec, rr, m, to_local, markers)
-            elif m["type"] == "fix" and e["receiver"] == "gs":
+            elif m["type"] == "fix" and e["receiver"] == GROUND:
                 _log_fix(rec, rr, m, to_local, markers)
     rrd_path = Path(rrd_path)
     rec.save(rrd_path, default_blueprint=_layout(rrb, game_map, phones))

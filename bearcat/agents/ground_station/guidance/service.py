@@ -50,7 +50,7 @@ class GuidanceService:
         advisor=None,
         aided=None,
         rate: float = 10.0,
-        name: str = "gs",
+        name: str = keys.GROUND,
         sight=None,
         uncertainty=None,
     ) -> None:
