@@ -13,7 +13,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 NEEDING = (
     "tests/test_browser_phone.py",
-    "tests/test_viewer.py",
+    "tests/test_viewer.py::test_pictures_at_two_times_show_north_up_and_each_agent_where_it_was",
+    "tests/test_viewer.py::test_a_time_after_the_end_or_without_a_picture_is_refused_in_one_sentence",
     "tests/test_kernel_network.py",
     "tests/test_transport.py::test_fixes_travel_over_udp_and_state_over_tcp",
     "tests/test_fault_suites.py::test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed",

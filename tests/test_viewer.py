@@ -29,10 +29,9 @@ from bearcat.maps import load_map
 from tests.support.scenario_files import write_scenario
 from tests.support.system import missing_vulkan
 
-pytestmark = [
-    pytest.mark.skipif(shutil.which("rerun") is None, reason="needs the Rerun viewer: pip install rerun-sdk"),
-    pytest.mark.skipif(missing_vulkan() is not None, reason=str(missing_vulkan())),
-]
+pytestmark = pytest.mark.skipif(shutil.which("rerun") is None, reason="needs the Rerun viewer: pip install rerun-sdk")
+renders = pytest.mark.skipif(missing_vulkan() is not None, reason=str(missing_vulkan()))
+"""For the tests that take pictures; the viewer listens (and is checked) before it needs a driver."""
 
 FIELD = load_map("field-50")  # 50 m x 50 m, the return strip y 45-50 m, the flag disk at (25, 15) m
 TOLERANCE = 1.5  # m between a marker's centre in the picture and where its agent was
@@ -138,6 +137,7 @@ def _count_near(mask: np.ndarray, point, radius: float) -> int:
     return int(mask[row - d : row + d + 1, column - d : column + d + 1].sum())
 
 
+@renders
 def test_pictures_at_two_times_show_north_up_and_each_agent_where_it_was(run, tmp_path):
     track = tracks(run)
     attacker_track = track["attacker"]
@@ -174,6 +174,7 @@ def test_pictures_at_two_times_show_north_up_and_each_agent_where_it_was(run, tm
     assert np.linalg.norm(seen[later] - seen[early]) > 4.0
 
 
+@renders
 def test_a_time_after_the_end_or_without_a_picture_is_refused_in_one_sentence(run, tmp_path):
     done = bearcat("view", run, "--screenshot", tmp_path / "late.png", "--at", 1e6)
     if "ChildProcessError" in done.stderr:
