@@ -11,7 +11,7 @@ import json
 import logging
 import math
 from pathlib import Path
-from typing import Annotated, Literal, get_args
+from typing import Annotated, get_args
 
 import msgspec
 import numpy as np
@@ -23,7 +23,7 @@ from shapely.geometry.polygon import orient
 from bearcat.bus.validation import Invalid, convert, describe
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
-from bearcat.maps.model import ROLES, Map, Region, SpeedFactor, Zone, check_origin, check_polygonal
+from bearcat.maps.model import Map, Region, Role, SpeedFactor, Zone, check_origin, check_polygonal
 
 log = logging.getLogger(__name__)
 
@@ -41,23 +41,23 @@ class _Properties(msgspec.Struct, frozen=True, tag_field="kind"):
     """A feature's ``properties``, by its ``kind``; others (styling from GIS tools) are ignored."""
 
 
-class AreaProperties(_Properties, tag="area"):
+class AreaProperties(_Properties, tag="area", frozen=True):
     speed: SpeedFactor = 1.0
 
 
-class ObstacleProperties(_Properties, tag="obstacle"):
+class ObstacleProperties(_Properties, tag="obstacle", frozen=True):
     name: Label | None = None
 
 
-class ZoneProperties(_Properties, tag="zone", kw_only=True):
+class ZoneProperties(_Properties, tag="zone", kw_only=True, frozen=True):
     speed: SpeedFactor
     name: Label | None = None
     width: Length | None = None  # lines only
 
 
-class RegionProperties(_Properties, tag="region", kw_only=True):
+class RegionProperties(_Properties, tag="region", kw_only=True, frozen=True):
     name: Label
-    role: Literal[ROLES]
+    role: Role
     team: Label | None = None
     radius: Length | None = None  # points only
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Annotated
+from typing import Annotated, Literal, get_args
 
 import shapely
 from msgspec import Meta
@@ -20,7 +20,8 @@ from bearcat.bus.validation import Invalid, convert
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
 
-ROLES = ("flag", "return", "target", "side")
+Role = Literal["flag", "return", "target", "side"]
+ROLES: tuple[Role, ...] = get_args(Role)
 
 SpeedFactor = Annotated[float, Meta(gt=0.0, le=1.0)]
 """Zero would be an obstacle, and nothing is faster than full speed."""

@@ -23,6 +23,7 @@ back.
 from __future__ import annotations
 
 import math
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -32,8 +33,10 @@ from bearcat.bus import keys
 from bearcat.bus.messages import Control, Detection, Fix, GameState, Message, Truth, UavTask
 from bearcat.maps.geodesy import to_local
 
-FAILSAFES = ("hold", "return", "land")
-STEERING = ("goto", "velocity")
+Failsafe = Literal["hold", "return", "land"]
+FAILSAFES: tuple[Failsafe, ...] = get_args(Failsafe)
+Steering = Literal["goto", "velocity"]
+STEERING: tuple[Steering, ...] = get_args(Steering)
 BRAKING = 2.0  # m/s^2 the velocity steering plans to brake at
 
 
