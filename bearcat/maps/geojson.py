@@ -11,7 +11,7 @@ import json
 import logging
 import math
 from pathlib import Path
-from typing import Annotated, get_args
+from typing import Annotated, Any, get_args
 
 import msgspec
 import numpy as np
@@ -102,6 +102,7 @@ def dumps(map: Map, units: str = "degrees") -> str:
         return json.dumps({"type": "Feature", "properties": properties, "geometry": mapping(_oriented(geometry))})
 
     features = [feature(map.area, kind="area", speed=None if map.area_speed == 1 else map.area_speed)]
+    assert map.obstacle_names is not None  # a Map fills them in
     features += [feature(o, kind="obstacle", name=n) for o, n in zip(map.obstacles, map.obstacle_names)]
     features += [feature(z.geometry, kind="zone", name=z.name, speed=z.speed) for z in map.zones]
     features += [
@@ -183,7 +184,7 @@ def parse_geojson(text: str, source: str, default_name: str) -> Map:
 
 def _parts(parsed) -> dict:
     """Map fields from checked features in metres; strips and disks become polygons here, after any unit change."""
-    parts = {"obstacles": [], "obstacle_names": [], "zones": [], "regions": {}}
+    parts: dict[str, Any] = {"obstacles": [], "obstacle_names": [], "zones": [], "regions": {}}
     for kind, label, geometry, props in parsed:
         try:
             if kind == "area":

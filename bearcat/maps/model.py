@@ -130,7 +130,8 @@ class Map:
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """``(xmin, ymin, xmax, ymax)`` of the area in metres."""
-        return tuple(float(v) for v in self.area.bounds)
+        xmin, ymin, xmax, ymax = self.area.bounds
+        return float(xmin), float(ymin), float(xmax), float(ymax)
 
     @cached_property
     def free_space(self):
@@ -150,6 +151,7 @@ class Map:
         return [r for r in self.regions.values() if r.role == role]
 
     def obstacle_label(self, index: int) -> str:
+        assert self.obstacle_names is not None  # filled in on construction
         name = self.obstacle_names[index]
         return f"{name!r}" if name else f"#{index}"
 
