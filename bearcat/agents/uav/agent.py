@@ -131,7 +131,7 @@ class UavAgent:
         if lost and self.flying and not self.ended and self.failsafe_at is None:
             self._fail_safe(now, f"nothing from the ground station for {self.link_timeout:g} s")
         if self.target is not None and self.state is not None and self.state.in_air and self.failsafe_at is None:
-            self.autopilot.velocity(*self._steering(self.state))
+            self.autopilot.velocity(*self._steering(self.state, self.target))
         s = self.state
         if s is None:
             return []
@@ -170,10 +170,10 @@ class UavAgent:
         elif self.flying:
             self.autopilot.goto(task.lat, task.lon, task.alt if task.alt > 0 else self.altitude)
 
-    def _steering(self, s: VehicleState) -> tuple[float, float, float]:
-        """The velocity toward the target: as fast as the vehicle may go while
+    def _steering(self, s: VehicleState, target: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The velocity toward ``target``: as fast as the vehicle may go while
         it can still brake before the point; climb or descend to its altitude."""
-        lat, lon, alt = self.target
+        lat, lon, alt = target
         east, north = to_local(lat, lon, self._frame(s))
         here = to_local(s.lat, s.lon, self._frame(s))
         d = np.array([east - here[0], north - here[1]])
