@@ -38,6 +38,8 @@ megabyte on a cellular link."""
 Line = Annotated[list[Point], msgspec.Meta(max_length=OUTLINE_POINTS)]
 Lines = Annotated[list[Line], msgspec.Meta(max_length=OUTLINE_LINES)]
 Text = Annotated[str, msgspec.Meta(max_length=200)]
+Phase = Literal["waiting", "running", "paused", "ended"]
+"""Where a game is: the referee's phases."""
 
 
 class Message(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
@@ -148,7 +150,7 @@ class GameState(Message, tag="state", frozen=True):
 
     seq: Sequence
     t: Time
-    phase: Literal["waiting", "running", "paused", "ended"]
+    phase: Phase
     elapsed: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] = 0.0
     winner: Name | None = None
     reason: Text = ""

@@ -308,7 +308,7 @@ def solver_fingerprint() -> str:
     and of the map geometry. A checkout that changes a solver between two
     releases (an editable install after a pull) then misses the cache
     instead of loading sets the old code solved."""
-    return _fingerprint(tuple(Path(p.__file__).parent for p in (bearcat.solvers, bearcat.maps)))
+    return _fingerprint(tuple(Path(p.__path__[0]) for p in (bearcat.solvers, bearcat.maps)))
 
 
 @functools.cache
