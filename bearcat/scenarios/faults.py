@@ -74,7 +74,9 @@ class _Fault(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tr
 
     @property
     def kind(self) -> str:
-        return self.__struct_config__.tag
+        tag = self.__struct_config__.tag
+        assert isinstance(tag, str)  # every kind of fault is tagged with its name
+        return tag
 
     @property
     def ends(self) -> float | None:

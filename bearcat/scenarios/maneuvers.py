@@ -268,7 +268,8 @@ def _store(path: Path, sets: BackflipSets) -> None:
         "runs": {k: [r.converged, r.converged_at, r.time, r.steps] for k, r in sets.capture.items()},
     }
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomically(path, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
+    # numpy types savez's allow_pickle beside its **kwds; none of these names is that.
+    write_atomically(path, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))  # type: ignore[arg-type]
 
 
 def _load(path: Path, backflip: Backflip) -> BackflipSets | None:

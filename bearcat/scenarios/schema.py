@@ -178,7 +178,9 @@ class AgentSpec(_Table, tag_field="behaviour", frozen=True):
 
     @property
     def behaviour(self) -> str:
-        return self.__struct_config__.tag
+        tag = self.__struct_config__.tag
+        assert isinstance(tag, str)  # every kind of agent is tagged with its behaviour's name
+        return tag
 
 
 class FollowGuidanceAgent(AgentSpec, tag="follow-guidance", frozen=True):
