@@ -99,6 +99,8 @@ def add_members(directory: Path | str, members: dict[str, str], *, hosts: tuple[
         ca_cert = x509.load_pem_x509_certificate((directory / f"{AUTHORITY}.pem").read_bytes())
     except FileNotFoundError:
         raise BusError(f"{directory} holds no certificate authority with its key (ca.pem, ca.key)") from None
+    if not isinstance(ca_key, ec.EllipticCurvePrivateKey):
+        raise BusError(f"{directory / (AUTHORITY + '.key')} is not an EC key, as make_authority writes")
     lifetime = min(VALIDITY, ca_cert.not_valid_after_utc - datetime.datetime.now(datetime.UTC))
     for name, role in members.items():
         keys.check_name(name, "peer name")
@@ -184,9 +186,10 @@ def members_of(directory: Path | str) -> dict[str, Member]:
         if not cert.not_valid_before_utc <= now <= cert.not_valid_after_utc:
             continue
         name, role = _attribute(cert, NameOID.COMMON_NAME), _attribute(cert, NameOID.ORGANIZATIONAL_UNIT_NAME)
-        if name != path.stem or role not in ROLES or not isinstance(cert.public_key(), ec.EllipticCurvePublicKey):
+        public_key = cert.public_key()
+        if name != path.stem or role not in ROLES or not isinstance(public_key, ec.EllipticCurvePublicKey):
             continue
-        found[name] = Member(name, role, cert.public_key())
+        found[name] = Member(name, role, public_key)
     return found
 
 
@@ -204,7 +207,10 @@ class Credentials:
             key = serialization.load_pem_private_key((self.directory / f"{name}.key").read_bytes(), None)
         except FileNotFoundError:
             raise BusError(f"{self.directory} holds no key for {name!r} ({name}.key)") from None
-        if key.public_key().public_numbers() != self.members[name].public_key.public_numbers():
+        if (
+            not isinstance(key, ec.EllipticCurvePrivateKey)
+            or key.public_key().public_numbers() != self.members[name].public_key.public_numbers()
+        ):
             raise BusError(f"{self.directory / (name + '.key')} is not the key of {name}.pem")
         self.role = self.members[name].role
         self._key = key

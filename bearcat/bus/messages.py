@@ -38,6 +38,8 @@ megabyte on a cellular link."""
 Line = Annotated[list[Point], msgspec.Meta(max_length=OUTLINE_POINTS)]
 Lines = Annotated[list[Line], msgspec.Meta(max_length=OUTLINE_LINES)]
 Text = Annotated[str, msgspec.Meta(max_length=200)]
+Phase = Literal["waiting", "running", "paused", "ended"]
+"""Where a game is: the referee's phases."""
 
 
 class Message(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=True, tag_field="type"):
@@ -50,7 +52,7 @@ class Message(msgspec.Struct, frozen=True, kw_only=True, forbid_unknown_fields=T
             raise ValueError(f"schema version {self.v} is not the supported {SCHEMA_VERSION}")
 
 
-class Fix(Message, tag="fix"):
+class Fix(Message, tag="fix", frozen=True):
     """A position report from an agent's phone GPS or a UAV's telemetry.
     ``accuracy`` is the reported horizontal error (metres, 1 sigma); ``heading``
     the compass; ``seq`` counts the sender's fixes, so a receiver can tell a
@@ -66,7 +68,7 @@ class Fix(Message, tag="fix"):
     accuracy: Metres | None = None
 
 
-class Truth(Message, tag="truth"):
+class Truth(Message, tag="truth", frozen=True):
     """Where an agent really is (simulation only; for the referee and the
     recorder); ``going``, that its behaviour has committed to its run (a
     fake-out's go, a go-no-go's go), which faults may count from."""
@@ -93,7 +95,7 @@ class Report(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     radius: Metres | None = None
 
 
-class Guidance(Message, tag="guidance"):
+class Guidance(Message, tag="guidance", frozen=True):
     """What one agent's screen shows, computed from the fixes the network delivered.
 
     ``game`` names the solver behind it; ``heading`` is the recommended
@@ -142,13 +144,13 @@ class Guidance(Message, tag="guidance"):
                 raise ValueError(f"{name} has {points} points in all, more than {OUTLINE_POINTS}")
 
 
-class GameState(Message, tag="state"):
+class GameState(Message, tag="state", frozen=True):
     """The referee's view of the game. ``phase`` moves waiting -> running
     (-> paused -> running) -> ended; ``winner`` is a team and ``reason`` says why."""
 
     seq: Sequence
     t: Time
-    phase: Literal["waiting", "running", "paused", "ended"]
+    phase: Phase
     elapsed: Annotated[float, msgspec.Meta(ge=0.0, le=1e9)] = 0.0
     winner: Name | None = None
     reason: Text = ""
@@ -157,7 +159,7 @@ class GameState(Message, tag="state"):
     judged_on: Literal["truth", "fixes"] = "truth"
 
 
-class Control(Message, tag="control"):
+class Control(Message, tag="control", frozen=True):
     """A command to every peer of a game; ``seq`` numbers a launcher's commands."""
 
     t: Time
@@ -166,7 +168,7 @@ class Control(Message, tag="control"):
     seq: Sequence = 0
 
 
-class UavTask(Message, tag="uav-task"):
+class UavTask(Message, tag="uav-task", frozen=True):
     """Where a UAV should go: a search target or a waypoint; land or hold in place."""
 
     uav: Name
@@ -178,7 +180,7 @@ class UavTask(Message, tag="uav-task"):
     alt: Altitude
 
 
-class Detection(Message, tag="detection"):
+class Detection(Message, tag="detection", frozen=True):
     """A UAV's camera saw ``agent`` at (``lat``, ``lon``) at time ``t``."""
 
     uav: Name
@@ -188,7 +190,7 @@ class Detection(Message, tag="detection"):
     lon: Longitude
 
 
-class FaultNotice(Message, tag="fault"):
+class FaultNotice(Message, tag="fault", frozen=True):
     """Fault ``fault`` of the run's plan holds from ``start`` until ``end``
     (None: until healed or the end), on the launcher's clock: each peer
     applies what concerns it."""

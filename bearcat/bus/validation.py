@@ -47,6 +47,7 @@ def convert(data: Any, kind: Any, *, at: str = "") -> Any:
 def _explain(error: msgspec.ValidationError, kind: Any, data: Any, at: str = "") -> Invalid:
     """The ``Invalid`` that ``error``, raised converting ``data`` to ``kind``, means."""
     parts = _WHERE.match(str(error))
+    assert parts is not None  # the pattern matches any text
     message = parts["message"]
     steps = [name or int(index) for name, index in _STEP.findall(parts["path"] or "")]
     node, value = _resolve(mi.type_info(kind), steps, data)

@@ -387,10 +387,10 @@ def robust_answers(args, game: CtfGame, guidance: CtfQueries, phase: str) -> dic
 
     rules = game.rules
     uncertainty = Uncertainty({"attacker": rules.attacker_speed, "defender": rules.defender_speed}, args.confidence)
-    radii = {
-        "attacker": uncertainty.radius("attacker", args.attacker_age, args.accuracy),
-        "defender": uncertainty.radius("defender", args.defender_age, args.accuracy),
-    }
+    attacker_radius = uncertainty.radius("attacker", args.attacker_age, args.accuracy)
+    defender_radius = uncertainty.radius("defender", args.defender_age, args.accuracy)
+    assert attacker_radius is not None and defender_radius is not None  # both top speeds are known
+    radii = {"attacker": attacker_radius, "defender": defender_radius}
     robust = RobustCtf(guidance)
     attacker = robust.cover("attacker", args.attacker, radii["attacker"])
     defender = robust.cover("defender", args.defender, radii["defender"])

@@ -127,7 +127,8 @@ def run_play(args) -> int:
         failing = "; ".join(str(c) for c in sets.checks if not c.holds)
         out.say(f"warning: the design does not hold ({failing}); the flips below carry no guarantee")
     nominal = nominal_flight(sets, maneuver.start_height)
-    times = tuple(float(t) for t in nominal.switches[:, 0])
+    impulse, drift, recovery = (float(t) for t in nominal.switches[:, 0])
+    times = (impulse, drift, recovery)
     spent = nominal.time_in_mode
     out.say(
         f"nominal flip (no disturbance): climb {spent[0]:.2f} s, impulse {spent[1]:.2f} s, drift {spent[2]:.2f} s, "

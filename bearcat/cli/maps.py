@@ -97,7 +97,7 @@ def _draw(m: Map):
     fig = Figure(figsize=(8, height), layout="constrained")
     ax = fig.subplots()
     scale = draw_map(ax, m)
-    if m.zones or m.area_speed != 1:
+    if scale is not None and (m.zones or m.area_speed != 1):
         fig.colorbar(scale, ax=ax, label="speed factor", shrink=0.8)
     ax.set_title(f"{m.name}\n{m.description}", fontsize=10)
     return fig

@@ -23,41 +23,53 @@ def _redraw_every() -> float:
     return 0.1 if sys.stderr.isatty() else LOGGED_EVERY
 
 
-def solve_bars(label: Callable[[str], str] | None = None, change_unit: str = "m", clock: str = "game time"):
+def solve_bars(
+    label: Callable[[str], str] | None = None, change_unit: str = "m", clock: str = "game time"
+) -> SolveBars:
     """A ``progress(name, t, horizon, change)`` callback, as the solvers call
     it, that draws one bar per set being solved. ``label(name)`` names a set
     on its bar (by default the capture-the-flag sets' names). A set's bar
     closes when the next set starts or at its horizon; ``progress.close()``
     closes the bar of a set that converged before its horizon."""
-    from tqdm import tqdm
-
     if label is None:
         from bearcat.solvers.ctf import SET_NAMES
 
         def label(name: str) -> str:
             return f"solving {SET_NAMES[name]} ({name} set)"
 
-    bars: dict = {}
+    return SolveBars(label, change_unit, clock)
 
-    def update(name: str, t: float, horizon: float, change: float) -> None:
-        bar = bars.get(name)
+
+class SolveBars:
+    """The callback ``solve_bars`` makes: one bar per set, by its name."""
+
+    def __init__(self, label: Callable[[str], str], change_unit: str, clock: str) -> None:
+        from tqdm import tqdm
+
+        self._tqdm = tqdm
+        self.label, self.change_unit, self.clock = label, change_unit, clock
+        self.bars: dict[str, tqdm] = {}
+
+    def __call__(self, name: str, t: float, horizon: float, change: float) -> None:
+        bar = self.bars.get(name)
         if bar is None:
-            update.close()
-            bar = bars[name] = tqdm(
+            self.close()
+            bar = self.bars[name] = self._tqdm(
                 total=round(horizon, 2),
-                desc=label(name),
+                desc=self.label(name),
                 file=sys.stderr,
                 mininterval=_redraw_every(),
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s of " + clock + " "
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n:.2f}/{total:.2f} s of " + self.clock + " "
                 "[{elapsed}<{remaining}{postfix}]",
             )
-        bar.set_postfix_str(f"change {change:.3g} {change_unit}", refresh=False)
+        bar.set_postfix_str(f"change {change:.3g} {self.change_unit}", refresh=False)
         bar.update(round(t - bar.n, 2))
         if t >= horizon - 1e-9:
             bar.close()
 
-    update.close = lambda: [bar.close() for bar in bars.values()]
-    return update
+    def close(self) -> None:
+        for bar in self.bars.values():
+            bar.close()
 
 
 @contextmanager
@@ -67,4 +79,8 @@ def counting(total: int, what: str, unit: str) -> Iterator[Callable[..., None]]:
     from tqdm import tqdm
 
     with tqdm(total=total, desc=what, unit=unit, file=sys.stderr, mininterval=_redraw_every()) as bar:
-        yield lambda *_: bar.update(1)
+
+        def finished(*_: object) -> None:
+            bar.update(1)
+
+        yield finished

@@ -36,6 +36,7 @@ class TargetSpec:
         if self.region is not None:
             mask = raster.masks[game_map.region(self.region).name]
         else:
+            assert self.disk is not None  # a target is a region or a disk
             cx, cy, radius = self.disk
             x, y = raster.grid.mesh()
             mask = (x - cx) ** 2 + (y - cy) ** 2 <= radius**2

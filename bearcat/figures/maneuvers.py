@@ -12,6 +12,7 @@ matplotlib.use("Agg")
 
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.artist import Artist
 from matplotlib.patches import Patch, Rectangle
 
 from bearcat.solvers.backflip import BackflipSets, TargetBox
@@ -42,7 +43,7 @@ def design_figure(sets: BackflipSets, flights: list[Flight] | None = None):
 def _attitude_panel(ax, sets: BackflipSets) -> None:
     grid = sets.design.attitude_grid
     phi, rate = (a * DEG for a in grid.axes())
-    handles = []
+    handles: list[Artist] = []
     for mode in ("recovery", "drift", "impulse"):
         value = sets.capture[mode].value
         colour = MODE_COLOURS[mode]

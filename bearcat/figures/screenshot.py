@@ -92,7 +92,7 @@ def _wait_for_recording(port: int, process: subprocess.Popen, errors, rrd: Path)
             time.sleep(0.1)
             continue
         recording = next((r for r in state.recordings if r.store_id == state.active_recording), None)
-        timeline = recording and next((t for t in recording.timelines if t.name == TIMELINE), None)
+        timeline = None if recording is None else next((t for t in recording.timelines if t.name == TIMELINE), None)
         if timeline is not None and not state.loading:
             return client, (timeline.end or 0) / 1e9
         time.sleep(0.1)

@@ -34,20 +34,15 @@ def ctf_geometry(game_map: Map, grid_points: int) -> CtfGeometry:
         blocked_distance = np.full(grid.shape, 2.0 * float(np.hypot(xmax - xmin, ymax - ymin)))
     else:
         blocked_distance = signed_distance(blocked, grid)
-    fields = dict(
-        grid=grid,
-        blocked=blocked_distance,
-        flag=signed_distance(flag, grid),
-        home=signed_distance(home, grid),
-        terrain=rasterize(game_map, grid=grid).speed,
-    )
-    for name, label in (("flag", "flag"), ("home", "return")):
-        if not (fields[name] <= 0).any():
+    flag_distance, home_distance = signed_distance(flag, grid), signed_distance(home, grid)
+    terrain = rasterize(game_map, grid=grid).speed
+    for distance, label in ((flag_distance, "flag"), (home_distance, "return")):
+        if not (distance <= 0).any():
             raise MapError(
                 f"the {label} region of map {game_map.name} covers no node of a {grid_points} x {grid_points} "
                 "grid; use more grid points"
             )
-    return CtfGeometry(**fields)
+    return CtfGeometry(grid=grid, blocked=blocked_distance, flag=flag_distance, home=home_distance, terrain=terrain)
 
 
 def _role_union(game_map: Map, role: str):

@@ -11,7 +11,7 @@ import json
 import logging
 import math
 from pathlib import Path
-from typing import Annotated, Literal, get_args
+from typing import Annotated, Any, get_args
 
 import msgspec
 import numpy as np
@@ -23,7 +23,7 @@ from shapely.geometry.polygon import orient
 from bearcat.bus.validation import Invalid, convert, describe
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
-from bearcat.maps.model import ROLES, Map, Region, SpeedFactor, Zone, check_origin, check_polygonal
+from bearcat.maps.model import Map, Region, Role, SpeedFactor, Zone, check_origin, check_polygonal
 
 log = logging.getLogger(__name__)
 
@@ -41,23 +41,23 @@ class _Properties(msgspec.Struct, frozen=True, tag_field="kind"):
     """A feature's ``properties``, by its ``kind``; others (styling from GIS tools) are ignored."""
 
 
-class AreaProperties(_Properties, tag="area"):
+class AreaProperties(_Properties, tag="area", frozen=True):
     speed: SpeedFactor = 1.0
 
 
-class ObstacleProperties(_Properties, tag="obstacle"):
+class ObstacleProperties(_Properties, tag="obstacle", frozen=True):
     name: Label | None = None
 
 
-class ZoneProperties(_Properties, tag="zone", kw_only=True):
+class ZoneProperties(_Properties, tag="zone", kw_only=True, frozen=True):
     speed: SpeedFactor
     name: Label | None = None
     width: Length | None = None  # lines only
 
 
-class RegionProperties(_Properties, tag="region", kw_only=True):
+class RegionProperties(_Properties, tag="region", kw_only=True, frozen=True):
     name: Label
-    role: Literal[ROLES]
+    role: Role
     team: Label | None = None
     radius: Length | None = None  # points only
 
@@ -102,6 +102,7 @@ def dumps(map: Map, units: str = "degrees") -> str:
         return json.dumps({"type": "Feature", "properties": properties, "geometry": mapping(_oriented(geometry))})
 
     features = [feature(map.area, kind="area", speed=None if map.area_speed == 1 else map.area_speed)]
+    assert map.obstacle_names is not None  # a Map fills them in
     features += [feature(o, kind="obstacle", name=n) for o, n in zip(map.obstacles, map.obstacle_names)]
     features += [feature(z.geometry, kind="zone", name=z.name, speed=z.speed) for z in map.zones]
     features += [
@@ -183,7 +184,7 @@ def parse_geojson(text: str, source: str, default_name: str) -> Map:
 
 def _parts(parsed) -> dict:
     """Map fields from checked features in metres; strips and disks become polygons here, after any unit change."""
-    parts = {"obstacles": [], "obstacle_names": [], "zones": [], "regions": {}}
+    parts: dict[str, Any] = {"obstacles": [], "obstacle_names": [], "zones": [], "regions": {}}
     for kind, label, geometry, props in parsed:
         try:
             if kind == "area":

@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from functools import cached_property
-from typing import Annotated
+from typing import Annotated, Literal, get_args
 
 import shapely
 from msgspec import Meta
@@ -20,7 +20,8 @@ from bearcat.bus.validation import Invalid, convert
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
 
-ROLES = ("flag", "return", "target", "side")
+Role = Literal["flag", "return", "target", "side"]
+ROLES: tuple[Role, ...] = get_args(Role)
 
 SpeedFactor = Annotated[float, Meta(gt=0.0, le=1.0)]
 """Zero would be an obstacle, and nothing is faster than full speed."""
@@ -129,7 +130,8 @@ class Map:
     @property
     def bounds(self) -> tuple[float, float, float, float]:
         """``(xmin, ymin, xmax, ymax)`` of the area in metres."""
-        return tuple(float(v) for v in self.area.bounds)
+        xmin, ymin, xmax, ymax = self.area.bounds
+        return float(xmin), float(ymin), float(xmax), float(ymax)
 
     @cached_property
     def free_space(self):
@@ -149,6 +151,7 @@ class Map:
         return [r for r in self.regions.values() if r.role == role]
 
     def obstacle_label(self, index: int) -> str:
+        assert self.obstacle_names is not None  # filled in on construction
         name = self.obstacle_names[index]
         return f"{name!r}" if name else f"#{index}"
 

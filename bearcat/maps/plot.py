@@ -45,12 +45,13 @@ def draw_map(ax, map: Map, *, zones: bool = True, labels: bool = True) -> Scalar
     colourbar (``fig.colorbar(scale, ax=ax, label="speed factor")``).
     """
     scale = ScalarMappable(Normalize(0.0, 1.0), SPEED_COLOURS) if zones else None
-    area_face = scale.to_rgba(map.area_speed) if zones else "white"
+    area_face = "white" if scale is None else scale.to_rgba(np.asarray(map.area_speed))
     _patch(ax, map.area, facecolor=area_face, edgecolor="none", zorder=0.1)
-    if zones:
+    if scale is not None:
         for zone in map.zones:
-            _patch(ax, zone.geometry, facecolor=scale.to_rgba(zone.speed), edgecolor="none", zorder=0.2)
+            _patch(ax, zone.geometry, facecolor=scale.to_rgba(np.asarray(zone.speed)), edgecolor="none", zorder=0.2)
     _patch(ax, map.area, facecolor="none", edgecolor="black", linewidth=1.2, zorder=0.6)
+    assert map.obstacle_names is not None  # a Map fills them in
     for obstacle, name in zip(map.obstacles, map.obstacle_names):
         # Edges in the fill colour hide the seams between abutting obstacles.
         _patch(ax, obstacle, facecolor=OBSTACLE_COLOUR, edgecolor=OBSTACLE_COLOUR, linewidth=0.5, zorder=0.5)

@@ -54,6 +54,7 @@ def rasterize(map: Map, spacing: float | None = None, *, grid: Grid | None = Non
     if (spacing is None) == (grid is None):
         raise TypeError("rasterize needs exactly one of spacing and grid")
     if grid is None:
+        assert spacing is not None  # exactly one of them was given
         xmin, ymin, xmax, ymax = map.bounds
         grid = Grid.covering((xmin, ymin), (xmax, ymax), spacing)
     if grid.ndim != 2:

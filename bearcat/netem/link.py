@@ -137,7 +137,8 @@ class LinkState:
         the model's outage windows are written in (None: before the game,
         when none applies)."""
         m, rng = self.model, self.rng
-        start, reasons = now, []
+        start = now
+        reasons: list[str] = []
         if game_time is not None:
             for outage in m.outages:
                 if outage.covers(game_time + (start - now)):

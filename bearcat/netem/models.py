@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Annotated
+from typing import Annotated, Literal, get_args
 
 import msgspec
 import numpy as np
 from msgspec import Meta
 
-DISTRIBUTIONS = ("constant", "uniform", "normal", "pareto", "lognormal")
+Distribution = Literal["constant", "uniform", "normal", "pareto", "lognormal"]
+DISTRIBUTIONS: tuple[Distribution, ...] = get_args(Distribution)
 
 # Bounds of the models a profile file gives as tables (netem/profiles.py reads them).
 Probability = Annotated[float, Meta(ge=0.0, le=1.0, description="a probability in [0, 1]")]
@@ -42,7 +43,7 @@ class Delay:
 
     base: float = 0.0
     jitter: float = 0.0
-    distribution: str = "normal"
+    distribution: Distribution = "normal"
 
     @property
     def mean(self) -> float:
@@ -74,7 +75,7 @@ class Delay:
         return max(0.0, self.base + extra)
 
 
-class GilbertElliott(_Table):
+class GilbertElliott(_Table, frozen=True):
     """Two-state burst loss: a good state losing ``loss_good`` of packets and
     a bad one losing ``loss_bad``; each packet moves good -> bad with ``p``
     and bad -> good with ``r`` (``tc netem loss gemodel p r 1-h 1-k``).
@@ -138,7 +139,7 @@ class LinkModel:
         return self == LinkModel()
 
 
-class GpsError(_Table):
+class GpsError(_Table, frozen=True):
     """Phone GPS error in metres (east, north).
 
     A bias per axis following a first-order Gauss-Markov process with
@@ -161,7 +162,7 @@ class GpsError(_Table):
         return s * (self.urban_factor if urban else 1.0)
 
 
-class CompassError(_Table):
+class CompassError(_Table, frozen=True):
     """Phone compass error in degrees: a bias drawn once per phone and white noise."""
 
     bias_sigma: ErrorDegrees = 0.0

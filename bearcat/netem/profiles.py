@@ -10,16 +10,16 @@ import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated
 
 import msgspec
 from msgspec import Meta
 
 from bearcat.bus.validation import Invalid, convert
 from bearcat.netem.models import (
-    DISTRIBUTIONS,
     CompassError,
     Delay,
+    Distribution,
     GilbertElliott,
     GpsError,
     LinkModel,
@@ -51,7 +51,7 @@ class LinkTable(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only
 
     delay: Lag = Delay.base
     jitter: Lag = Delay.jitter
-    distribution: Literal[DISTRIBUTIONS] = Delay.distribution
+    distribution: Distribution = Delay.distribution
     jitter_time: Lag = LinkModel.jitter_time
     loss: Probability = LinkModel.loss
     burst: GilbertElliott | None = LinkModel.burst

@@ -212,7 +212,10 @@ class Shim:
             if self._blocked(sender, receiver, now) is not None:
                 still.append(held)
                 continue
-            if any(c.severs(sender, receiver, sent) and c.end - c.start >= self.lease for c in self.cuts):
+            if any(
+                c.severs(sender, receiver, sent) and c.end is not None and c.end - c.start >= self.lease
+                for c in self.cuts
+            ):
                 self._log(sent, sender, receiver, key, payload, "dropped", None, ("session lost",))
                 continue
             for d in self._send(sender, receiver, key, payload, sent, now, True):
@@ -240,7 +243,7 @@ class Shim:
         """Why nothing crosses from ``sender`` to ``receiver`` at ``now``, or None."""
         if any(c.severs(sender, receiver, now) for c in self.cuts):
             return "partition"
-        if self.dead_zones is None:
+        if self.dead_zones is None or self.where is None:
             return None
         for peer in (sender, receiver):
             p = self.where(peer)

@@ -29,12 +29,17 @@ from __future__ import annotations
 import logging
 from collections import Counter
 from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 from bearcat.agents.protocol import Agent, Send
 from bearcat.bus import keys
 from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.messages import Message
+
+if TYPE_CHECKING:
+    from bearcat.bus.inprocess import LocalSession
+    from bearcat.bus.zenoh_session import ZenohSession
 
 log = logging.getLogger(__name__)
 
@@ -51,13 +56,13 @@ class Dispatcher:
         self.now = now
         self.failures: Counter[str] = Counter()  # agent -> exceptions raised
         self.clocks: dict[str, Callable[[float], float]] = {}  # agent -> its own time from the runtime's
-        self._sessions: dict[str, object] = {}
+        self._sessions: dict[str, LocalSession | ZenohSession] = {}
         self._inboxes: dict[str, Inbox] = {}
         self._told: dict[str, int] = {}  # agent -> how many of its events are recorded
         self._budgets: dict[str, SenderBudget] = {}
         self._unbelieved = SenderBudget()  # what a peer's session would not believe, by the sender it claimed
 
-    def attach(self, agent: Agent, session) -> None:
+    def attach(self, agent: Agent, session: LocalSession | ZenohSession) -> None:
         """Drive ``agent`` on ``session`` (peers that run several agents share one)."""
         self._sessions[agent.name] = session
         self._inboxes[agent.name] = Inbox(agent.name)

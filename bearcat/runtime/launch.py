@@ -287,6 +287,7 @@ def _play(
         run_flags += ("--faults", str((out / "faults.toml").resolve()))
     port = free_port()
     game = scenario.name
+    places: LocalPeers
     if network == "kernel":
         places = KernelPeers(port, netem, seed, report=out / "network.json", secure=secure)
     else:

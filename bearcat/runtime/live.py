@@ -196,9 +196,13 @@ async def run_peer(
             for (receiver, key, sender), d in shim.poll(now):
                 loop.call_later(max(d.at - now, 0.0), handles[receiver], key, d.payload, sender)
 
+    def interrupted() -> None:
+        why.update(reason="interrupted")
+        finished.set()
+
     for sig in (signal.SIGINT, signal.SIGTERM):
         try:
-            loop.add_signal_handler(sig, lambda: (why.update(reason="interrupted"), finished.set()))
+            loop.add_signal_handler(sig, interrupted)
         except (NotImplementedError, RuntimeError):  # not the main thread
             pass
 
@@ -315,6 +319,7 @@ def start_peer(
     players = None
     if role == "ground-station":
         players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge, provisional=provisional)
+        assert players.guidance is not None  # a cast with its ground station
         agents, name = players.ground, players.guidance.name
     elif role == "uav":
         from bearcat.agents.uav.autopilot import MavsdkAutopilot
@@ -360,8 +365,9 @@ def start_peer(
         from bearcat.runtime.recovery import resume as take_up
 
         last = last_sent(f"{out}/peers/{name}.jsonl")
-        if _run_wide(out):  # what the peer's own log left to the launcher's
-            last = last_sent(_run_wide(out), sender=name, kinds=BODILESS) | last
+        run_wide = _run_wide(out)
+        if run_wide is not None:  # what the peer's own log left to the launcher's
+            last = last_sent(run_wide, sender=name, kinds=BODILESS) | last
         for agent in agents:
             take_up(agent, last, scenario.name)
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
@@ -551,11 +557,13 @@ def fetch_scenario(
     from bearcat.maps.geojson import parse_geojson
     from bearcat.scenarios.schema import parse_scenario
 
-    credentials = None if certs is None else Credentials(certs, name)
+    if certs is not None and name is None:
+        raise BusError("asking with certificates needs the peer name to ask as")
+    credentials = None if certs is None or name is None else Credentials(certs, name)
     asker = f"fetch-{int(time.time() * 1000) % 10**9}" if credentials is None else credentials.name
     if secure:
         _check_secure(credentials, connect)
-    how = config(connect=connect, **({"listen": [], "mode": "client", "tls": credentials} if secure else {}))
+    how = config(connect=connect, listen=[], mode="client", tls=credentials) if secure else config(connect=connect)
     with ZenohSession(asker, how, credentials=credentials) as session:
         end = time.monotonic() + timeout
         text = geojson = None

@@ -35,7 +35,7 @@ from bearcat.bus import keys
 from bearcat.bus.codec import encode
 from bearcat.bus.messages import FaultNotice, GameState, Truth
 from bearcat.scenarios.fault_effects import noted, sides
-from bearcat.scenarios.faults import GROUND, Fault
+from bearcat.scenarios.faults import GROUND, Fault, Restart
 
 log = logging.getLogger(__name__)
 
@@ -147,7 +147,7 @@ class LiveFaults:
             self._thaw(k)
         elif fault.kind == "cpu":
             self._free(k)
-        elif fault.kind == "restart":
+        elif isinstance(fault, Restart):
             self._returning.append(fault.target)
         elif fault.kind in ("partition", "outage", "degrade") and self.network is not None:
             self.network.heal(fault.peers() if fault.kind == "degrade" else None)

@@ -29,6 +29,8 @@ checker reads both.
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import zenoh
 
 from bearcat.bus import keys
@@ -36,6 +38,9 @@ from bearcat.bus.messages import GameState
 from bearcat.runtime.recovery import resume
 from bearcat.scenarios.fault_effects import apply_network, lie, noted, sides, skewed
 from bearcat.scenarios.faults import GROUND, LAUNCHER, Fault
+
+if TYPE_CHECKING:
+    import simpy
 
 WATCH = 0.1  # s between looks for the events faults count from
 
@@ -67,7 +72,7 @@ class SimulatedFaults:
         self.happened: dict[str, float] = {"start": 0.0}
         self.applied: list[dict] = []
         self._unseen: set[tuple[str, str]] = set()  # (watcher peer, watched peer) whose tokens vanished
-        self._events: dict[str, object] = {}
+        self._events: dict[str, simpy.Event] = {}
         for k, fault in enumerate(plan):
             env.process(self._run(k, fault))
         if any(f.after != "start" for f in plan):

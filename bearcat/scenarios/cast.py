@@ -12,6 +12,7 @@ import functools
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TypeVar
 
 import numpy as np
 import shapely
@@ -44,10 +45,11 @@ from bearcat.agents.uav.agent import UavAgent
 from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.autopilot import SimulatedAutopilot
 from bearcat.netem.profiles import Profile
-from bearcat.scenarios.schema import Scenario, ScenarioError
+from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
 from bearcat.solvers.ctf_queries import CtfQueries
 
 STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
+_Rules = TypeVar("_Rules", CtfRules, ReachAvoidRules, PursuitRules)
 
 
 def stream(seed: int, agent: str, purpose: str) -> np.random.Generator:
@@ -77,7 +79,10 @@ def awaited_sets(scenario: Scenario) -> AwaitedSets | None:
 def unsolved(scenario: Scenario) -> bool:
     """Whether ``scenario`` is a capture-the-flag game whose own sets are not
     in the cache yet: its first run, on a fresh clone perhaps."""
-    return scenario.game == "ctf" and not stored(_CtfGame(scenario).own(), scenario.rules.stages)
+    if scenario.game != "ctf":
+        return False
+    game = _CtfGame(scenario)
+    return not stored(game.own(), game.table.stages)
 
 
 @dataclass
@@ -92,7 +97,7 @@ class Cast:
 
     people: dict[str, HumanAgent]
     referee: Referee | None = None
-    guidance: object | None = None
+    guidance: GuidanceService | None = None
     tasking: list = field(default_factory=list)
     uavs: dict[str, UavAgent] = field(default_factory=dict)
     awaited: AwaitedSets | None = None
@@ -140,7 +145,7 @@ def build_cast(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
         )
     game = GAMES[scenario.game](scenario, provisional=provisional)
-    if scenario.uavs and not hasattr(game, "tasker"):
+    if scenario.uavs and not isinstance(game, _CtfGame):
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
     flown = ([u.id for u in scenario.uavs] if people is None else []) if uavs is None else list(uavs)
@@ -149,15 +154,16 @@ def build_cast(
     fleet = {}
     for u in flown:
         spec = _uav_spec(scenario, u)
+        assert isinstance(game, _CtfGame)  # the scenario has UAVs, so it is a capture-the-flag game
         autopilot = autopilots[u] if u in autopilots else simulated_autopilot(scenario, spec, seed)
         fleet[u] = game.uav(spec, autopilot, truth=uav_truth)
     if not ground:
         return Cast(crowd, uavs=fleet)
     if judge not in ("truth", "fixes"):
         raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
-    tasking = [game.tasker()] if scenario.uavs else []
+    tasking = [game.tasker()] if scenario.uavs and isinstance(game, _CtfGame) else []
     guidance = game.guidance(ctf_progress)
-    adopt = game.adopt if game.awaited is not None else None
+    adopt = game.adopt if isinstance(game, _CtfGame) and game.awaited is not None else None
     referee = game.referee(on_truth=judge == "truth")
     starts = {a.id: a.start for a in scenario.agents}
     warm_up = functools.partial(guidance.warm_up, starts)
@@ -189,7 +195,8 @@ class _CtfGame:
             raise ScenarioError(f"{scenario.source}: capture-the-flag is 1 vs 1: one attacker and one defender")
         self.scenario = scenario
         self.attacker, self.defender = attackers[0], defenders[0]
-        game_map, r = scenario.map, scenario.rules
+        game_map, r = scenario.map, _rules_of(scenario, CtfRules)
+        self.table = r
         self.rules = default_rules(
             game_map,
             self.attacker.speed,
@@ -208,9 +215,13 @@ class _CtfGame:
         asked = r.provisional_grid
         if asked:
             coarse = unresolved_capture(game_map, asked, self.rules.capture_radius)
-            if asked >= r.grid or coarse is not None:
-                why = "not below rules.grid" if asked >= r.grid else f"too coarse to resolve capture (use {coarse[1]})"
-                raise ScenarioError(f"{scenario.source}: rules.provisional_grid {asked} is {why}")
+            if asked >= r.grid:
+                raise ScenarioError(f"{scenario.source}: rules.provisional_grid {asked} is not below rules.grid")
+            if coarse is not None:
+                raise ScenarioError(
+                    f"{scenario.source}: rules.provisional_grid {asked} is too coarse to resolve capture "
+                    f"(use {coarse[1]})"
+                )
         self.provisional = provisional_grid(game_map, r.grid, self.rules.capture_radius, asked) if provisional else None
         self.awaited: AwaitedSets | None = None
         self.flag = shapely.union_all([g.geometry for g in game_map.regions_with_role("flag")])
@@ -218,10 +229,10 @@ class _CtfGame:
         self.flag_taken = r.stages == "return"
         self.phase = "return" if self.flag_taken else "capture"
         self.goals = {"capture": self.flag, "return": self.home}
-        self._navigator = None
-        self._solved = None
-        self._tasker = None
-        self._advisor = None
+        self._navigator: Navigator | None = None
+        self._solved: CtfQueries | None = None
+        self._tasker: UavTasker | None = None
+        self._advisor: CtfAdvisor | None = None
         teams = {a.id: a.team for a in scenario.agents} | {u.id: u.team for u in scenario.uavs}
         self.sight = Sight(
             game_map, teams, line_of_sight=r.visibility == "line-of-sight", uavs=[u.id for u in scenario.uavs]
@@ -232,18 +243,18 @@ class _CtfGame:
         if self._solved is None:
             s = self.scenario
             self.awaited = self.awaiting()
-            grid = s.rules.grid if self.awaited is None else self.awaited.provisional
-            found = load_or_solve(CtfGame(s.map, grid, self.rules), s.rules.stages, progress=progress)
+            grid = self.table.grid if self.awaited is None else self.awaited.provisional
+            found = load_or_solve(CtfGame(s.map, grid, self.rules), self.table.stages, progress=progress)
             self._solved = CtfQueries(found.solution)
         return self._solved
 
     def own(self) -> CtfGame:
         """The game on the scenario's own grid."""
-        return CtfGame(self.scenario.map, self.scenario.rules.grid, self.rules)
+        return CtfGame(self.scenario.map, self.table.grid, self.rules)
 
     def awaiting(self) -> AwaitedSets | None:
         """The sets to answer from provisional ones until they are solved, if any."""
-        own, stages = self.own(), self.scenario.rules.stages
+        own, stages = self.own(), self.table.stages
         if self.provisional is None or stored(own, stages):
             return None
         return AwaitedSets(own, stages, self.provisional)
@@ -270,7 +281,7 @@ class _CtfGame:
 
     def guidance(self, progress=None) -> GuidanceService:
         s = self.scenario
-        advisor = self._advisor = CtfAdvisor(
+        self._advisor = CtfAdvisor(
             s.map,
             self.solved(progress),
             attacker=self.attacker.id,
@@ -279,8 +290,9 @@ class _CtfGame:
             robust=[a.id for a in s.agents if s.robust(a)],
             uncertainty=_uncertainty(s),
         )
+        advisor: CtfAdvisor | SearchAdvisor = self._advisor
         if s.uavs:
-            advisor = SearchAdvisor(advisor, self.tasker(), self.sight.side("attacker"))
+            advisor = SearchAdvisor(self._advisor, self.tasker(), self.sight.side("attacker"))
         return _service(s, advisor, sight=self.sight if self.sight.line_of_sight or s.uavs else None)
 
     def tasker(self) -> UavTasker:
@@ -314,7 +326,7 @@ class _CtfGame:
         return self._tasker
 
     def uav(self, spec, autopilot, truth: bool = True) -> UavAgent:
-        opponents = [a.id for a in self.scenario.agents if a.team != spec.team]
+        opponents = tuple(a.id for a in self.scenario.agents if a.team != spec.team)
         return UavAgent(
             self.scenario.name,
             spec.id,
@@ -361,13 +373,14 @@ class _PursuitGame:
             raise ScenarioError(f"{scenario.source}: a pursuit game has one evader")
         self.evader = evaders[0]
         self.pursuers = scenario.team("pursuer")
-        self._navigator = None
+        self.table = _rules_of(scenario, PursuitRules)
+        self._navigator: Navigator | None = None
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
             runners=(self.evader.id,),
             chasers=tuple(p.id for p in self.pursuers),
-            capture_radius=self.scenario.rules.capture_radius,
+            capture_radius=self.table.capture_radius,
             time_limit=self.scenario.time_limit,
             teams=("evader", "pursuer"),
             lasting_wins=True,
@@ -401,12 +414,13 @@ class _ReachAvoidGame:
             raise ScenarioError(f"{scenario.source}: a reach-avoid game has one attacker")
         self.attacker = attackers[0]
         self.defenders = scenario.team("defender")
-        names = scenario.rules.targets
+        self.table = _rules_of(scenario, ReachAvoidRules)
+        names = self.table.targets
         self.targets = [(n, scenario.map.region(n).geometry) for n in names]
         self.goals = {"capture": self.targets[0][1], "return": self.targets[-1][1]}
         xmin, ymin, xmax, ymax = scenario.map.bounds
-        self.radius = scenario.rules.capture_radius or 0.005 * max(xmax - xmin, ymax - ymin)
-        self._navigator = None
+        self.radius = self.table.capture_radius or 0.005 * max(xmax - xmin, ymax - ymin)
+        self._navigator: Navigator | None = None
 
     def referee(self, on_truth: bool = True) -> Referee:
         contest = Contest(
@@ -426,10 +440,10 @@ class _ReachAvoidGame:
             s.map,
             attacker=self.attacker.id,
             defenders=[d.id for d in self.defenders],
-            targets=s.rules.targets,
+            targets=self.table.targets,
             speeds={a.id: a.speed for a in s.agents},
             capture_radius=self.radius,
-            spacing=s.rules.spacing or max(xmax - xmin, ymax - ymin) / 200,
+            spacing=self.table.spacing or max(xmax - xmin, ymax - ymin) / 200,
             robust=s.robust(self.attacker),
             uncertainty=_uncertainty(s),
         )
@@ -463,7 +477,18 @@ def _uncertainty(scenario: Scenario) -> Uncertainty:
     return Uncertainty(speeds, scenario.guidance_confidence)
 
 
-GAMES = {"ctf": _CtfGame, "pursuit": _PursuitGame, "reach-avoid": _ReachAvoidGame}
+GAMES: dict[str, type[_CtfGame] | type[_PursuitGame] | type[_ReachAvoidGame]] = {
+    "ctf": _CtfGame,
+    "pursuit": _PursuitGame,
+    "reach-avoid": _ReachAvoidGame,
+}
+
+
+def _rules_of(scenario: Scenario, kind: type[_Rules]) -> _Rules:
+    """The rules of ``scenario``, which its game reads as ``kind``."""
+    rules = scenario.rules
+    assert isinstance(rules, kind), f"a {scenario.game} scenario has {type(rules).__name__}"
+    return rules
 
 
 def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None) -> HumanAgent:

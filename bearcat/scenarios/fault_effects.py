@@ -54,4 +54,7 @@ def skewed(fault: Clock, start: float) -> Callable[[float], float]:
 
 def lie(fault: Gps) -> tuple[str, tuple[float, float]]:
     """What the phone's GPS reports instead of the truth (``Phone.lie``)."""
-    return fault.mode, fault.position if fault.mode == "spoof" else fault.offset
+    if fault.mode != "spoof":
+        return fault.mode, fault.offset
+    assert fault.position is not None  # a spoof's position is required when the plan is read
+    return fault.mode, fault.position

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import tomllib
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import TYPE_CHECKING, Annotated, Literal
 
 import msgspec
 from msgspec import Meta
@@ -55,7 +55,10 @@ GameTime = Annotated[float, Meta(ge=0.0, le=86400.0, extra={"unit": "s"})]
 Lasting = Annotated[float, Meta(gt=0.0, le=86400.0, extra={"unit": "s"})]
 Metres = Annotated[float, Meta(ge=-1e6, le=1e6, extra={"unit": "m"})]
 Offset = Annotated[tuple[Metres, Metres], Meta(description="[east, north] in metres")]
-ProfileName = Literal[tuple(load_profiles())]
+if TYPE_CHECKING:
+    ProfileName = str  # read from the profiles file: checked when a plan is read
+else:
+    ProfileName = Literal[tuple(load_profiles())]
 Event = Annotated[str, Meta(min_length=1, max_length=80)]
 
 EVENTS = ("start", "flag-taken")
@@ -70,7 +73,9 @@ class _Fault(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tr
 
     @property
     def kind(self) -> str:
-        return self.__struct_config__.tag
+        tag = self.__struct_config__.tag
+        assert isinstance(tag, str)  # every kind of fault is tagged with its name
+        return tag
 
     @property
     def ends(self) -> float | None:
@@ -90,33 +95,33 @@ class _Fault(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tr
         return f"{self.kind} {who} at {when}{lasting}".replace("  ", " ")
 
 
-class Kill(_Fault, tag="kill", kw_only=True):
+class Kill(_Fault, tag="kill", kw_only=True, frozen=True):
     """The peer's process is killed (SIGKILL): it says no goodbye."""
 
     target: Name
 
 
-class Stop(_Fault, tag="stop", kw_only=True):
+class Stop(_Fault, tag="stop", kw_only=True, frozen=True):
     """The peer is asked to stop (SIGTERM) and does, cleanly."""
 
     target: Name
 
 
-class Pause(_Fault, tag="pause", kw_only=True):
+class Pause(_Fault, tag="pause", kw_only=True, frozen=True):
     """The peer's process is frozen (SIGSTOP) and thawed (SIGCONT) ``duration`` s later."""
 
     target: Name
     duration: Lasting
 
 
-class Restart(_Fault, tag="restart", kw_only=True):
+class Restart(_Fault, tag="restart", kw_only=True, frozen=True):
     """The peer is killed and started again ``duration`` s later; it resumes from what it recorded."""
 
     target: Name
     duration: Annotated[float, Meta(ge=0.0, le=3600.0, extra={"unit": "s"})] = 1.0
 
 
-class Partition(_Fault, tag="partition", kw_only=True):
+class Partition(_Fault, tag="partition", kw_only=True, frozen=True):
     """The peers are cut into ``groups``: nothing crosses from one to another.
     Peers no group names stay with the ground station. It lasts ``duration``
     s, or until a heal."""
@@ -132,18 +137,18 @@ class Partition(_Fault, tag="partition", kw_only=True):
         return super().describe().replace(",".join(self.peers()), cut, 1)
 
 
-class Heal(_Fault, tag="heal", kw_only=True):
+class Heal(_Fault, tag="heal", kw_only=True, frozen=True):
     """Every partition in force ends."""
 
 
-class Outage(_Fault, tag="outage", kw_only=True):
+class Outage(_Fault, tag="outage", kw_only=True, frozen=True):
     """Every link to and from the peer is down for ``duration`` s."""
 
     target: Name
     duration: Lasting
 
 
-class Degrade(_Fault, tag="degrade", kw_only=True):
+class Degrade(_Fault, tag="degrade", kw_only=True, frozen=True):
     """The peer's links follow network profile ``profile`` for ``duration`` s."""
 
     target: Name
@@ -151,7 +156,7 @@ class Degrade(_Fault, tag="degrade", kw_only=True):
     duration: Lasting
 
 
-class Clock(_Fault, tag="clock", kw_only=True):
+class Clock(_Fault, tag="clock", kw_only=True, frozen=True):
     """The peer's clock jumps by ``offset`` s and then drifts by ``drift``
     s per s, for ``duration`` s or to the end. Namespaces share the kernel's
     clock, so this is the peer's own clock, not the host's."""
@@ -162,7 +167,7 @@ class Clock(_Fault, tag="clock", kw_only=True):
     duration: Lasting | None = None
 
 
-class Gps(_Fault, tag="gps", kw_only=True):
+class Gps(_Fault, tag="gps", kw_only=True, frozen=True):
     """The phone's fixes lie: ``jump`` adds ``offset``, ``freeze`` repeats the
     last fix, ``spoof`` reports ``position``; for ``duration`` s or to the end."""
 
@@ -173,13 +178,13 @@ class Gps(_Fault, tag="gps", kw_only=True):
     duration: Lasting | None = None
 
 
-class DiskFull(_Fault, tag="disk-full", kw_only=True):
+class DiskFull(_Fault, tag="disk-full", kw_only=True, frozen=True):
     """The run directory's disk fills up (a tmpfs of ``size`` bytes holds the run)."""
 
     size: Annotated[int, Meta(ge=1 << 20, le=1 << 34, extra={"unit": "bytes"})] = 64 << 20
 
 
-class Cpu(_Fault, tag="cpu", kw_only=True):
+class Cpu(_Fault, tag="cpu", kw_only=True, frozen=True):
     """The peer gets only ``share`` of one core for ``duration`` s."""
 
     target: Name

@@ -49,12 +49,12 @@ class _Table(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tr
     pass
 
 
-class _Head(_Table):
+class _Head(_Table, frozen=True):
     name: str
     description: str = ""
 
 
-class _Vehicle(_Table):
+class _Vehicle(_Table, frozen=True):
     mass: Positive
     gravity: Positive
     translational_drag: Annotated[float, Meta(ge=0)]
@@ -64,13 +64,13 @@ class _Vehicle(_Table):
     max_thrust: Positive
 
 
-class _Noise(_Table):
+class _Noise(_Table, frozen=True):
     thrust: Share
     drift: Share
     torque_share: Share
 
 
-class _Laws(_Table):
+class _Laws(_Table, frozen=True):
     impulse_acceleration: Positive
     impulse_rate_gain: Positive
     impulse_lift: Positive
@@ -81,41 +81,41 @@ class _Laws(_Table):
     climb_lift: Positive
 
 
-class _TurnOff(_Table):
+class _TurnOff(_Table, frozen=True):
     spin_down_time: Positive
 
 
-class _Box(_Table):
+class _Box(_Table, frozen=True):
     angle: Span
     rate: Span
 
 
-class _Targets(_Table):
+class _Targets(_Table, frozen=True):
     T1: _Box
     T2: _Box
     T3: _Box
     hover: _Box
 
 
-class _Horizons(_Table):
+class _Horizons(_Table, frozen=True):
     impulse: Positive
     drift: Positive
     recovery: Positive
 
 
-class _Safety(_Table):
+class _Safety(_Table, frozen=True):
     fall_rate: Positive
     start_height: Positive
 
 
-class _Grids(_Table):
+class _Grids(_Table, frozen=True):
     angle: Axis
     rate: Axis
     height: Axis
     climb_rate: Axis
 
 
-class _ManeuverFile(_Table):
+class _ManeuverFile(_Table, frozen=True):
     maneuver: _Head
     vehicle: _Vehicle
     noise: _Noise
@@ -268,7 +268,8 @@ def _store(path: Path, sets: BackflipSets) -> None:
         "runs": {k: [r.converged, r.converged_at, r.time, r.steps] for k, r in sets.capture.items()},
     }
     path.parent.mkdir(parents=True, exist_ok=True)
-    write_atomically(path, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))
+    # numpy types savez's allow_pickle beside its **kwds; none of these names is that.
+    write_atomically(path, lambda f: np.savez(f, meta=np.array(json.dumps(meta)), **arrays))  # type: ignore[arg-type]
 
 
 def _load(path: Path, backflip: Backflip) -> BackflipSets | None:

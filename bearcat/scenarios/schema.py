@@ -53,13 +53,13 @@ import tomllib
 from dataclasses import dataclass
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import TYPE_CHECKING, Annotated, Any, Literal, get_args
 
 import msgspec
 from msgspec import Meta
 from shapely.geometry import Polygon
 
-from bearcat.agents.uav.agent import FAILSAFES, STEERING
+from bearcat.agents.uav.agent import Failsafe, Steering
 from bearcat.bus.messages import Name
 from bearcat.bus.validation import Invalid, convert, not_one_of
 from bearcat.maps import Map, MapError, load_map
@@ -67,16 +67,23 @@ from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
 from bearcat.scenarios.faults import Fault, check_faults
 
-TEAMS = {"ctf": ("attacker", "defender"), "reach-avoid": ("attacker", "defender"), "pursuit": ("evader", "pursuer")}
+Game = Literal["ctf", "reach-avoid", "pursuit"]
+Team = Literal["attacker", "defender", "evader", "pursuer"]
+TEAMS: dict[Game, tuple[Team, Team]] = {
+    "ctf": ("attacker", "defender"),
+    "reach-avoid": ("attacker", "defender"),
+    "pursuit": ("evader", "pursuer"),
+}
 MAX_CELLS = 2000
 """Most cells across the map that ``rules.spacing`` may ask of the fast-marching grid."""
 
-Game = Literal[tuple(TEAMS)]
-Team = Literal[tuple(dict.fromkeys(team for teams in TEAMS.values() for team in teams))]
-ProfileName = Literal[tuple(load_profiles())]
-TRANSPORTS = ("tcp", "udp")
+if TYPE_CHECKING:
+    ProfileName = str  # read from the profiles file: checked when a scenario is read
+else:
+    ProfileName = Literal[tuple(load_profiles())]
+Transport = Literal["tcp", "udp"]
+TRANSPORTS: tuple[Transport, ...] = get_args(Transport)
 """How best-effort messages (fixes, guidance) travel in live runs; reliable ones always go over tcp."""
-Transport = Literal[TRANSPORTS]
 Coordinate = Annotated[float, Meta(ge=-1e7, le=1e7, extra={"unit": "m"})]
 Point = Annotated[tuple[Coordinate, Coordinate], Meta(description="[east, north] in metres")]
 Route = Annotated[tuple[Point, ...], Meta(min_length=1, description="a list of [east, north] points in metres")]
@@ -104,29 +111,29 @@ class _Table(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tr
 # ---------------------------------------------------------------- behaviours
 
 
-class _Options(_Table):
+class _Options(_Table, frozen=True):
     def places(self) -> tuple[tuple[str, tuple[float, float]], ...]:
         """(key, point) of every point these options send the agent to, checked against the map."""
         return ()
 
 
-class NoOptions(_Options):
+class NoOptions(_Options, frozen=True):
     pass
 
 
-class UnaidedOptions(_Options):
+class UnaidedOptions(_Options, frozen=True):
     standoff: Distance = 6.0
     share: Share = 0.5
     lead: Lag = 1.5
 
 
-class FakeOutOptions(_Options):
+class FakeOutOptions(_Options, frozen=True):
     turn_every: Annotated[float, Meta(gt=0.0, le=600.0, extra={"unit": "s"})] = 1.5
     spread: Angle = 100.0
     margin: Distance = 0.0
 
 
-class GoNoGoOptions(_Options):
+class GoNoGoOptions(_Options, frozen=True):
     hold: Point
     fresh: Period = 2.0
     margin: Distance = 0.0
@@ -136,7 +143,7 @@ class GoNoGoOptions(_Options):
         return (("hold", self.hold),)
 
 
-class WaypointsOptions(_Options):
+class WaypointsOptions(_Options, frozen=True):
     points: Route
     loop: bool = False
 
@@ -144,7 +151,7 @@ class WaypointsOptions(_Options):
         return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
 
 
-class PatrolOptions(UnaidedOptions, kw_only=True):
+class PatrolOptions(UnaidedOptions, kw_only=True, frozen=True):
     points: Route
     memory: Memory = 5.0
     wander: bool = False
@@ -156,7 +163,7 @@ class PatrolOptions(UnaidedOptions, kw_only=True):
 # ---------------------------------------------------------------- players
 
 
-class AgentSpec(_Table, tag_field="behaviour"):
+class AgentSpec(_Table, tag_field="behaviour", frozen=True):
     """A person: one subclass per behaviour, each with its options."""
 
     id: Name
@@ -171,41 +178,43 @@ class AgentSpec(_Table, tag_field="behaviour"):
 
     @property
     def behaviour(self) -> str:
-        return self.__struct_config__.tag
+        tag = self.__struct_config__.tag
+        assert isinstance(tag, str)  # every kind of agent is tagged with its behaviour's name
+        return tag
 
 
-class FollowGuidanceAgent(AgentSpec, tag="follow-guidance"):
+class FollowGuidanceAgent(AgentSpec, tag="follow-guidance", frozen=True):
     options: NoOptions = NoOptions()
 
 
-class UnaidedAgent(AgentSpec, tag="direct"):
+class UnaidedAgent(AgentSpec, tag="direct", frozen=True):
     options: UnaidedOptions = UnaidedOptions()
 
 
-class FakeOutAgent(AgentSpec, tag="fake-out"):
+class FakeOutAgent(AgentSpec, tag="fake-out", frozen=True):
     options: FakeOutOptions = FakeOutOptions()
 
 
-class GoNoGoAgent(AgentSpec, tag="go-no-go", kw_only=True):
+class GoNoGoAgent(AgentSpec, tag="go-no-go", kw_only=True, frozen=True):
     options: GoNoGoOptions
 
 
-class WaypointsAgent(AgentSpec, tag="waypoints", kw_only=True):
+class WaypointsAgent(AgentSpec, tag="waypoints", kw_only=True, frozen=True):
     options: WaypointsOptions
 
 
-class PatrolAgent(AgentSpec, tag="patrol", kw_only=True):
+class PatrolAgent(AgentSpec, tag="patrol", kw_only=True, frozen=True):
     options: PatrolOptions
 
 
-class KeyboardAgent(AgentSpec, tag="keyboard"):
+class KeyboardAgent(AgentSpec, tag="keyboard", frozen=True):
     options: NoOptions = NoOptions()
 
 
 Agent = FollowGuidanceAgent | UnaidedAgent | FakeOutAgent | GoNoGoAgent | WaypointsAgent | PatrolAgent | KeyboardAgent
 
 
-class UavSpec(_Table):
+class UavSpec(_Table, frozen=True):
     """A quadrotor flying for ``team``: its take-off point, altitude above
     home, camera footprint radius r_q, limits, how the ground station tasks
     it, and what it does when it loses the ground station."""
@@ -218,10 +227,10 @@ class UavSpec(_Table):
     speed: Annotated[float, Meta(gt=0.0, le=40.0, extra={"unit": "m/s"})] = 8.0
     accel: Annotated[float, Meta(gt=0.0, le=20.0, extra={"unit": "m/s^2"})] = 3.0
     search: Literal["reachability", "lawnmower", "nearest"] = "reachability"
-    failsafe: Literal[FAILSAFES] = "hold"
+    failsafe: Failsafe = "hold"
     link_timeout: Period = 5.0
     fix_rate: Rate = 2.0
-    steer: Literal[STEERING] = "goto"
+    steer: Steering = "goto"
 
 
 # ---------------------------------------------------------------- rules per game
@@ -230,7 +239,7 @@ Horizon = Annotated[float, Meta(gt=0.0, le=3600.0, extra={"unit": "s"})]
 Spacing = Annotated[float, Meta(gt=0.0, le=100.0, extra={"unit": "m"})]
 
 
-class CtfRules(_Table):
+class CtfRules(_Table, frozen=True):
     """Unset radius and times are derived from the map and the speeds (``ctf_cache.default_rules``)."""
 
     capture_radius: Radius | None = None
@@ -245,13 +254,13 @@ class CtfRules(_Table):
     visibility: Literal["full", "line-of-sight"] = "full"
 
 
-class ReachAvoidRules(_Table):
+class ReachAvoidRules(_Table, frozen=True):
     capture_radius: Radius | None = None
     targets: Annotated[tuple[Annotated[str, Meta(min_length=1)], ...], Meta(min_length=1)] = ("flag", "home")
     spacing: Spacing | None = None
 
 
-class PursuitRules(_Table):
+class PursuitRules(_Table, frozen=True):
     capture_radius: Radius = 0.5
     spacing: Spacing | None = None
     strategy: Literal["area", "pure"] = "area"
@@ -263,7 +272,7 @@ RULES = {"ctf": CtfRules, "reach-avoid": ReachAvoidRules, "pursuit": PursuitRule
 # ---------------------------------------------------------------- the file
 
 
-class ScenarioTable(_Table):
+class ScenarioTable(_Table, frozen=True):
     name: Name  # names the game on the bus
     map: Annotated[str, Meta(min_length=1)]
     game: Game
@@ -279,7 +288,7 @@ class ScenarioTable(_Table):
     lease: Annotated[float, Meta(ge=0.5, le=120.0, extra={"unit": "s"})] = 10.0
 
 
-class GuidanceTable(_Table):
+class GuidanceTable(_Table, frozen=True):
     rate: Rate = 10.0
     # Answers that hold wherever the players may be, not only at their reports
     # (capture-the-flag, search and reach-avoid guidance; pursuit has no robust form).
@@ -290,7 +299,7 @@ class GuidanceTable(_Table):
     confidence: Annotated[float, Meta(ge=0.0, le=0.999)] = 0.95
 
 
-class ScenarioFile(_Table):
+class ScenarioFile(_Table, frozen=True):
     scenario: ScenarioTable
     agent: Annotated[tuple[Agent, ...], Meta(min_length=1, description="at least one [[agent]] table")]
     rules: dict[str, Any] = {}

@@ -211,6 +211,7 @@ def design(backflip: Backflip, *, progress: SetProgress | None = None, scheme: s
             **kw,
         ),
     )
+    assert handed_over.tstar is not None and rec.tstar is not None  # both solved with record_tstar
     drift_time = _longest(handed_over.tstar, reach_start <= 0, spin_down_time + backflip.drift_horizon)
     recovery_time = _longest(rec.tstar, backflip.t2.value(grid) <= 0, backflip.recovery_horizon)
     envelope = lift_envelope(backflip, recovery_time)

@@ -128,7 +128,8 @@ def fly(
         b.recovery_horizon,
         limit,
     )
-    return Flight(path, switches, bool(flags[0]), bool(flags[1]), tuple(float(s) for s in spent))
+    climb, impulse, drift, recovery = (float(s) for s in spent)
+    return Flight(path, switches, bool(flags[0]), bool(flags[1]), (climb, impulse, drift, recovery))
 
 
 def fly_many(
@@ -147,7 +148,7 @@ def fly_many(
     called after each (a progress bar)."""
     streams = np.random.SeedSequence(seed).spawn(trials)
     reached = unsafe = 0
-    kept = []
+    kept: list[Flight] = []
     for stream in streams:
         flight = fly(sets, policy, np.random.default_rng(stream), scale=scale, times=times, start_height=start_height)
         reached += flight.reached

@@ -88,7 +88,8 @@ def play(
 
     t, phase_start, flag_time = 0.0, 0.0, None
     times, a_track, d_track, phases = [0.0], [xa.copy()], [xd.copy()], []
-    winner = reason = None
+    winner: str | None = None
+    reason = ""  # set with the winner
     while winner is None:
         if np.hypot(*(xa - xd)) <= rules.capture_radius:
             winner, reason = "defender", "captured"

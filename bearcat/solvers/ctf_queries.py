@@ -31,6 +31,7 @@ from __future__ import annotations
 import itertools
 import math
 from dataclasses import dataclass
+from typing import TYPE_CHECKING, cast
 
 import contourpy
 import numba
@@ -40,6 +41,9 @@ import shapely
 from bearcat.solvers.ctf import EDGE_SLACK, CtfGeometry, CtfSolution, Rules, SetSolution
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
+
+if TYPE_CHECKING:
+    from contourpy._contourpy import FillReturn_OuterOffset
 
 __all__ = ["PHASES", "CtfQueries", "StateReport", "compile_kernels"]
 
@@ -185,7 +189,7 @@ class CtfQueries:
         generator = contourpy.contour_generator(x, y, np.asarray(values, np.float64).T, fill_type="OuterOffset")
         finite = float(np.max(np.abs(values))) + 1.0
         lower, upper = (-finite, 0.0) if side == "attacker" else (0.0, finite)
-        points, offsets = generator.filled(lower, upper)
+        points, offsets = cast("FillReturn_OuterOffset", generator.filled(lower, upper))  # as fill_type says
         shapes = []
         for outline, cuts in zip(points, offsets):
             rings = [outline[a:b] for a, b in itertools.pairwise(cuts) if b - a >= 4]

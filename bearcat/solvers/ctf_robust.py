@@ -154,8 +154,8 @@ class RobustCtf:
         # plain heading does (end of thesis 3.4), it hurries: the step that
         # leaves its worst time to win, T* over the defender's set, least.
         found = self.queries.value_set(phase)
-        hurry = side == "attacker" and worst <= 0 and found.time_to_win is not None
-        scored = [_flat(found.time_to_win), flat] if hurry else [flat]
+        time_to_win = found.time_to_win if side == "attacker" and worst <= 0 else None
+        scored = [flat] if time_to_win is None else [_flat(time_to_win), flat]
         k = -1
         for matrix in scored:  # T* is infinite where a step leaves the set: then by the value
             k = _best_heading(

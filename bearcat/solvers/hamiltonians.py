@@ -181,7 +181,7 @@ def _lower_simple_motion(h: SimpleMotion, grid: Grid, dtype) -> Lowered:
     return Lowered(args, rate)
 
 
-def _input_set(s, name: str):
+def _input_set(s, name: str) -> tuple[int, np.ndarray, np.ndarray]:
     """Kernel encoding ``(kind, a, b)`` of an input set; an absent set is an
     input of dimension zero."""
     if s is None:

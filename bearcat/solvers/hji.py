@@ -476,13 +476,13 @@ def _front_slope(u: np.ndarray) -> float:
     """The rise of ``u`` over one cell at its zero level: the 90th
     percentile, over pairs of neighbours on either side of zero along any
     axis, of their difference (1 when the grid has no such pair)."""
-    rises = []
+    pairs = []
     for axis in range(u.ndim):
         below = np.moveaxis(u, axis, 0)
         a, b = below[:-1], below[1:]
         crossing = (a <= 0) != (b <= 0)
-        rises.append(np.abs(b[crossing] - a[crossing]))
-    rises = np.concatenate(rises)
+        pairs.append(np.abs(b[crossing] - a[crossing]))
+    rises = np.concatenate(pairs)
     return float(np.percentile(rises, 90)) if rises.size else 1.0
 
 

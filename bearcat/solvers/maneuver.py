@@ -89,10 +89,11 @@ def forward_reach(grid: Grid, dynamics: ControlAffine, start, horizon: float, **
     starting in ``start`` (<= 0 inside), for some disturbance; a controlled
     input, if there is one, may do anything within its bounds too."""
     inputs = [s for s in (dynamics.control, dynamics.disturbance) if s is not None]
-    if not inputs or not all(isinstance(s, Box) for s in inputs):
+    boxes = [s for s in inputs if isinstance(s, Box)]
+    if not inputs or len(boxes) < len(inputs):
         raise InputError("a forward reach needs the mode's inputs as boxes (at least one)")
-    lo = tuple(v for s in inputs for v in s.lo)
-    hi = tuple(v for s in inputs for v in s.hi)
+    lo = tuple(v for s in boxes for v in s.lo)
+    hi = tuple(v for s in boxes for v in s.hi)
     reversed_dynamics = ControlAffine(_reversed(dynamics.dynamics, dynamics.control, dynamics.disturbance), Box(lo, hi))
     return solve_reach_avoid(grid, reversed_dynamics, start, horizon=horizon, **solver)
 

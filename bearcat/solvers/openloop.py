@@ -102,7 +102,7 @@ def solve_openloop(
     """
     if grid.ndim != 2:
         raise InputError(f"the open-loop game is played on a 2-D grid, got {grid.ndim} dimensions")
-    attacker = _check_point(grid, attacker, "attacker")
+    source = _check_point(grid, attacker, "attacker")
     stage_speeds = [_check_speed(grid, s, f"stage {k + 1} speed") for k, s in enumerate(stage_speeds)]
     targets = [_check_target(grid, t, k) for k, t in enumerate(targets)]
     if not targets:
@@ -111,7 +111,7 @@ def solve_openloop(
         raise InputError(f"got {len(stage_speeds)} stage speed maps for {len(targets)} targets")
     if order not in (1, 2):
         raise InputError(f"order must be 1 or 2, got {order!r}")
-    _check_passable(grid, attacker, stage_speeds[0], "attacker")
+    _check_passable(grid, source, stage_speeds[0], "attacker")
     hx, hy = grid.spacing
 
     checked = [_check_defender(grid, d, k) for k, d in enumerate(defenders)]
@@ -119,10 +119,10 @@ def solve_openloop(
 
     stages: list[StageSolution] = []
     seeds: list[np.ndarray] = []
-    initial = fmm.point_source(grid, attacker, stage_speeds[0])
+    initial = fmm.point_source(grid, source, stage_speeds[0])
     # Within a capture radius at t = 0 is captured, even where the grid nodes
     # around (all the marching sees) are not.
-    if any(math.dist(attacker, position) <= radius for position, _, radius in checked):
+    if any(math.dist(source, position) <= radius for position, _, radius in checked):
         initial[:] = np.inf
     blocked = None
     for k, (speed, target) in enumerate(zip(stage_speeds, targets)):
@@ -140,7 +140,7 @@ def solve_openloop(
         else:
             initial = np.where(target, phi, np.inf)
 
-    path = None if blocked is not None else _extract_path(grid, attacker, stages, seeds)
+    path = None if blocked is not None else _extract_path(grid, source, stages, seeds)
     return OpenLoopSolution(
         grid=grid, capture_time=capture_time, stages=tuple(stages), path=path, blocked_stage=blocked
     )
@@ -175,9 +175,10 @@ def _stage(grid: Grid, phi: np.ndarray, target: np.ndarray) -> StageSolution:
     times = phi.ravel()[nodes]
     best = int(np.argmin(times))
     value = float(times[best])
-    goal = None
+    goal: tuple[float, float] | None = None
     if math.isfinite(value):
-        goal = tuple(float(c) for c in grid.point(np.unravel_index(nodes[best], grid.shape)))
+        x, y = grid.point(np.unravel_index(nodes[best], grid.shape))
+        goal = (float(x), float(y))
     return StageSolution(phi=phi, safe=safe, value=value, safe_area=float(safe.sum()) * grid.cell_area, goal=goal)
 
 
@@ -205,7 +206,9 @@ def _extract_path(grid, attacker, stages, seeds) -> OpenLoopPath:
         pieces.append((d.points[::-1], d.values[::-1]))
         start = tuple(d.points[-1])
     pieces.reverse()
-    points, times, starts = [], [], []
+    points: list[np.ndarray] = []
+    times: list[np.ndarray] = []
+    starts: list[int] = []
     for p, t in pieces:
         if times:
             # The junction opens this stage. Interpolation near it can put the

@@ -85,7 +85,7 @@ def run_trial(task: dict) -> dict:
     entropy, *spawn = task["seed"]
     rng = np.random.default_rng(np.random.SeedSequence(entropy, spawn_key=tuple(spawn)))
     evader, pursuers = domain.initial_condition(rng, task["pursuers"], setup.separation)
-    times = {}
+    times: dict[str, float | None] = {}
     for name in ("area", "pure"):
         # One set of travel times per chase, shared by the evader and the pursuers,
         # so the fronts and the safe set one computes for a state serve the other.
@@ -103,7 +103,7 @@ def run_trial(task: dict) -> dict:
             max_time=setup.max_time,
         )
         times[name] = chase.capture_time
-    area, pure = (math.inf if times[k] is None else times[k] for k in ("area", "pure"))
+    area, pure = (math.inf if t is None else t for t in (times["area"], times["pure"]))
     return {
         "key": task["key"],
         "domain": task["domain"],
@@ -196,7 +196,7 @@ class _Domain:
                     return p
 
         evader = sample()
-        chosen = []
+        chosen: list[np.ndarray] = []
         while len(chosen) < pursuers:
             p = sample()
             if np.hypot(*(p - evader)) > separation:

@@ -88,7 +88,7 @@ class Run:
             raise FileNotFoundError(f"{directory} is not a run directory: it has no events.jsonl")
         self.directory = directory
         self.torn: dict[str, int] = {}  # log -> line number of its first unreadable line
-        self.listening: dict[str, tuple[float, float]] = {}  # receiver -> first and last time it received
+        self.listening: dict[str | None, tuple[float, float]] = {}  # receiver -> first and last time it received
         self.events = self._read(directory / "events.jsonl")
         self.peer_logs = {p.stem: self._read(p) for p in sorted((directory / "peers").glob("*.jsonl"))}
         self.outcome = self._outcome()

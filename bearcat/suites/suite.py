@@ -39,7 +39,7 @@ from bearcat.bus.messages import Name
 from bearcat.bus.validation import Invalid, convert
 from bearcat.runtime.run_directory import write_scenario
 from bearcat.scenarios.faults import Fault, FaultError, check_faults, load_faults, refusal, write_faults
-from bearcat.scenarios.schema import ScenarioError, list_scenarios, load_scenario
+from bearcat.scenarios.schema import Scenario, ScenarioError, list_scenarios, load_scenario
 from bearcat.scenarios.variants import vary
 from bearcat.suites.checker import INVARIANTS, Run, check_run, detected_after
 
@@ -72,7 +72,7 @@ class Case:
     """One case, ready to run: its scenario (with the variants applied), plan and seeds."""
 
     name: str
-    scenario: object
+    scenario: Scenario
     faults: tuple
     seeds: tuple[int, ...]
     expect: tuple[str, ...]

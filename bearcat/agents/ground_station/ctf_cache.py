@@ -312,7 +312,7 @@ def solver_fingerprint() -> str:
     editable install after a pull) then misses the cache instead of
     loading sets the old code solved; one that changes only comments or
     docstrings keeps it."""
-    return _fingerprint(tuple(Path(p.__file__).parent for p in (bearcat.solvers, bearcat.maps)))
+    return _fingerprint(tuple(Path(p.__path__[0]) for p in (bearcat.solvers, bearcat.maps)))
 
 
 @functools.cache

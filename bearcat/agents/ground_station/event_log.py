@@ -97,21 +97,22 @@ class EventLog:
     def _write(self, record: dict) -> None:
         event = record["event"] if record["event"] != "impaired" else f"impaired:{record['action']}"
         self.counts[event] = self.counts.get(event, 0) + 1
-        if self._fd is None:
+        fd = self._fd
+        if fd is None:
             return
         line = (json.dumps(record, separators=(",", ":")) + "\n").encode()
         try:
-            written = os.write(self._fd, line)
+            written = os.write(fd, line)
             if written < len(line):
                 raise OSError(f"only {written} of {len(line)} bytes written")
             self._size += written
         except OSError as exc:
-            self._refused(exc)
+            self._refused(fd, exc)
 
-    def _refused(self, exc: OSError) -> None:
-        """Cut the file back to its last whole line and count the loss."""
+    def _refused(self, fd: int, exc: OSError) -> None:
+        """Cut the file ``fd`` back to its last whole line and count the loss."""
         try:
-            os.ftruncate(self._fd, self._size)
+            os.ftruncate(fd, self._size)
         except OSError:
             pass
         self.lost += 1

@@ -34,7 +34,7 @@ import shapely
 
 from bearcat.agents.protocol import Send
 from bearcat.bus import keys
-from bearcat.bus.messages import Control, Fix, GameState, Message, Truth
+from bearcat.bus.messages import Control, Fix, GameState, Message, Phase, Truth
 from bearcat.maps import Map
 from bearcat.solvers.pursuit_game import first_contact
 
@@ -55,8 +55,8 @@ class Contest:
     capture_radius: float
     time_limit: float
     teams: tuple[str, str]
-    targets: tuple[tuple[str, object], ...] = ()
-    forbidden: tuple[tuple[str, object], ...] = ()
+    targets: tuple[tuple[str, shapely.Geometry], ...] = ()
+    forbidden: tuple[tuple[str, shapely.Geometry], ...] = ()
     flag_taken: bool = False
     lasting_wins: bool = False
 
@@ -81,7 +81,7 @@ class Referee:
         self.subscriptions = (source, keys.control(game))
         self.watches = (keys.every(game, "alive"),)
         self.period = 0.1
-        self.phase = "waiting"
+        self.phase: Phase = "waiting"
         self.started_at: float | None = None
         self.winner: str | None = None
         self.reason = ""
@@ -94,7 +94,7 @@ class Referee:
         self._judged: dict[str, np.ndarray] = {}
         self._last_sent = -np.inf
         self._changed = True
-        self._missing: dict[str, tuple[float, str]] = {}  # player -> (since, role) while its token is away
+        self._missing: dict[str, tuple[float, str | None]] = {}  # player -> (since, role) while its token is away
         for _, geometry in (*contest.targets, *contest.forbidden):
             shapely.prepare(geometry)
 
@@ -156,6 +156,7 @@ class Referee:
     # ------------------------------------------------------------------ the rules
 
     def _judge(self, now: float) -> None:
+        assert self.started_at is not None  # the game is running
         c = self.contest
         here = {a: p for a, p in self._now.items() if a not in self._missing}
         for runner in c.runners:

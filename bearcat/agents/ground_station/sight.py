@@ -13,6 +13,8 @@ games of chapter 3.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 import shapely
 
@@ -24,7 +26,7 @@ class Sight:
     included); ``uavs`` fly above the buildings and are known to their own
     side only."""
 
-    def __init__(self, game_map: Map, teams: dict[str, str], *, line_of_sight: bool, uavs=()) -> None:
+    def __init__(self, game_map: Map, teams: Mapping[str, str], *, line_of_sight: bool, uavs=()) -> None:
         self.teams = dict(teams)
         self.uavs = frozenset(uavs)
         self.line_of_sight = line_of_sight

@@ -144,17 +144,17 @@ class UavTasker:
             seen_q |= search.footprint(self.grid, self._fixes[u.name][0], u.camera_radius)
         dt = 0.0 if self._last_update is None else now - self._last_update
         self._last_update = now
-        tracking = self._seen is not None and now - self._seen[1] <= TRACK_FOR
-        if tracking:
-            self.possible.found(self._seen[0], radius=self.defender_speed * max(now - self._seen[1], 0.0))
+        tracked = self._seen if self._seen is not None and now - self._seen[1] <= TRACK_FOR else None
+        if tracked is not None:
+            self.possible.found(tracked[0], radius=self.defender_speed * max(now - tracked[1], 0.0))
         else:
             self.possible.advance(dt, self.defender_speed, seen_a | seen_q)
         self.picture.possible = self.possible.mask
         claimed = np.zeros(self.grid.shape, dtype=bool)  # where the UAVs chosen before are bound
         out = []
         for u in flying:
-            if tracking:
-                target, tier = tuple(self._seen[0]), None
+            if tracked is not None:
+                target, tier = tuple(tracked[0]), None
             else:
                 target, tier = self._choose(u, a, seen_a, seen_q | claimed)
             self.picture.targets[u.name], self.picture.tiers[u.name] = target, tier
@@ -226,7 +226,8 @@ class UavTasker:
         path, index = self._sweeps[u.name]
         if np.hypot(*(path[index] - at)) <= max(2.0, 0.2 * u.camera_radius):
             self._sweeps[u.name][1] = index = (index + 1) % len(path)
-        return tuple(float(v) for v in path[index])
+        x, y = path[index]
+        return float(x), float(y)
 
     def worst_case(self, attacker, values=None) -> tuple[float, float] | None:
         """The place in P_D where the defender would do best against an
@@ -242,7 +243,8 @@ class UavTasker:
             return None
         masked = np.where(possible, values, -np.inf)
         k = np.unravel_index(int(np.argmax(masked)), masked.shape)
-        return tuple(float(v) for v in self.grid.point(k))
+        x, y = self.grid.point(k)
+        return float(x), float(y)
 
     def adopt(self, ctf: CtfQueries) -> None:
         """Search from ``ctf`` from now on: the game's own sets, taken up after provisional ones."""
@@ -266,5 +268,6 @@ class UavTasker:
 
     def _resampled(self, values: np.ndarray) -> np.ndarray:
         """A field on the solver's player grid, on the search grid."""
+        assert self.ctf is not None  # the field came from its sets
         sample = RegularGridInterpolator(self.ctf.geometry.grid.axes(), values, bounds_error=False, fill_value=-1.0)
         return sample(self._nodes)

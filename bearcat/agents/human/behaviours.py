@@ -282,19 +282,19 @@ class Keyboard:
 
 def make(name: str, options: msgspec.Struct, rng: np.random.Generator):
     """The behaviour ``name`` with the scenario's ``options`` (a Struct of the schema)."""
-    options = msgspec.structs.asdict(options)
+    given = msgspec.structs.asdict(options)
     if name == "follow-guidance":
         return FollowGuidance()
     if name == "direct":
-        return Unaided(**options)
+        return Unaided(**given)
     if name == "fake-out":
-        return FakeOut(rng, **options)
+        return FakeOut(rng, **given)
     if name == "go-no-go":
-        return GoNoGo(**options)
+        return GoNoGo(**given)
     if name == "waypoints":
-        return Waypoints(**options)
+        return Waypoints(**given)
     if name == "patrol":
-        return Patrol(rng=rng, **options)
+        return Patrol(rng=rng, **given)
     if name == "keyboard":
         return Keyboard()
     raise ValueError(f"there is no behaviour {name!r}")

@@ -103,7 +103,7 @@ class Bridge:
             [
                 web.get("/", self._index_page),
                 web.get("/ws", self._socket),
-                web.get("/favicon.ico", lambda request: web.Response(status=204)),
+                web.get("/favicon.ico", self._no_icon),
             ]
         )
         self._runner = web.AppRunner(app, access_log=None, handle_signals=False)
@@ -129,6 +129,9 @@ class Bridge:
         if not self._allowed(request):
             return web.Response(status=403, text="This link lacks its player's token: open the link you were given.")
         return web.Response(body=self._index, content_type="text/html", headers={"Cache-Control": "no-store"})
+
+    async def _no_icon(self, request: web.Request) -> web.Response:
+        return web.Response(status=204)
 
     async def _socket(self, request: web.Request) -> web.StreamResponse:
         if not self._allowed(request):

@@ -20,6 +20,7 @@ from typing import Annotated
 
 import msgspec
 import numpy as np
+from shapely.geometry import MultiPolygon, Polygon
 
 from bearcat.agents.human.phone import Display
 from bearcat.agents.protocol import Send
@@ -86,7 +87,9 @@ class PagePhone:
                 accuracy=None if page.accuracy is None else page.accuracy * SIGMA_PER_95,
             )
             key = keys.fix(self.game, self.name)
-            fix = decode(encode(fix), key)  # what any receiver checks, checked before it leaves
+            checked = decode(encode(fix), key)  # what any receiver checks, checked before it leaves
+            assert isinstance(checked, Fix)  # a fix key carries only fixes
+            fix = checked
         except (Invalid, Refused, ValueError, TypeError) as exc:
             reason = str(exc).split(":")[0] if isinstance(exc, Invalid) else type(exc).__name__
             self.drops[reason] += 1
@@ -143,7 +146,7 @@ class PagePhone:
             "name": m.name,
             "bounds": list(m.bounds),
             "obstacles": [_points(np.asarray(o.exterior.coords)) for o in m.obstacles],
-            "regions": {r.name: _points(np.asarray(r.geometry.exterior.coords)) for r in m.regions.values()},
+            "regions": {r.name: _points(np.asarray(_outline(r.geometry).exterior.coords)) for r in m.regions.values()},
         }
 
     # ------------------------------------------------------------------ the agent protocol
@@ -167,6 +170,11 @@ class PagePhone:
 
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         return []
+
+
+def _outline(geometry: Polygon | MultiPolygon) -> Polygon:
+    """The one polygon the page draws for a region: the region, or its largest part."""
+    return geometry if isinstance(geometry, Polygon) else max(geometry.geoms, key=lambda part: part.area)
 
 
 def _points(points) -> list[list[float]]:

@@ -23,6 +23,7 @@ back.
 from __future__ import annotations
 
 import math
+from typing import Literal, get_args
 
 import numpy as np
 
@@ -32,8 +33,10 @@ from bearcat.bus import keys
 from bearcat.bus.messages import Control, Detection, Fix, GameState, Message, Truth, UavTask
 from bearcat.maps.geodesy import to_local
 
-FAILSAFES = ("hold", "return", "land")
-STEERING = ("goto", "velocity")
+Failsafe = Literal["hold", "return", "land"]
+FAILSAFES: tuple[Failsafe, ...] = get_args(Failsafe)
+Steering = Literal["goto", "velocity"]
+STEERING: tuple[Steering, ...] = get_args(Steering)
 BRAKING = 2.0  # m/s^2 the velocity steering plans to brake at
 
 
@@ -128,7 +131,7 @@ class UavAgent:
         if lost and self.flying and not self.ended and self.failsafe_at is None:
             self._fail_safe(now, f"nothing from the ground station for {self.link_timeout:g} s")
         if self.target is not None and self.state is not None and self.state.in_air and self.failsafe_at is None:
-            self.autopilot.velocity(*self._steering(self.state))
+            self.autopilot.velocity(*self._steering(self.state, self.target))
         s = self.state
         if s is None:
             return []
@@ -167,10 +170,10 @@ class UavAgent:
         elif self.flying:
             self.autopilot.goto(task.lat, task.lon, task.alt if task.alt > 0 else self.altitude)
 
-    def _steering(self, s: VehicleState) -> tuple[float, float, float]:
-        """The velocity toward the target: as fast as the vehicle may go while
+    def _steering(self, s: VehicleState, target: tuple[float, float, float]) -> tuple[float, float, float]:
+        """The velocity toward ``target``: as fast as the vehicle may go while
         it can still brake before the point; climb or descend to its altitude."""
-        lat, lon, alt = self.target
+        lat, lon, alt = target
         east, north = to_local(lat, lon, self._frame(s))
         here = to_local(s.lat, s.lon, self._frame(s))
         d = np.array([east - here[0], north - here[1]])

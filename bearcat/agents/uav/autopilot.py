@@ -17,13 +17,16 @@ import asyncio
 import logging
 import math
 from dataclasses import dataclass
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.flight import Flight, MainMode, SubMode
 from bearcat.maps.geodesy import bearing, to_geodetic, to_local
+
+if TYPE_CHECKING:
+    from mavsdk.asyncio import Mavsdk
 
 log = logging.getLogger("bearcat.uav")
 TAKE_OFF_WAIT = 10.0  # s a reposition waits for a vehicle that was told to take off to leave the ground
@@ -138,7 +141,7 @@ class MavsdkAutopilot:
         self._state: dict = {}
         self._queue: asyncio.Queue | None = None
         self._tasks: list[asyncio.Task] = []
-        self._mavsdk = None
+        self._mavsdk: Mavsdk | None = None
         self._offboard = False
         self._yaw = 0.0
 
@@ -150,27 +153,28 @@ class MavsdkAutopilot:
         from mavsdk.asyncio.plugins.telemetry import TelemetryAsync
 
         _route_mavsdk_logs()
-        self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-        await self._mavsdk.__aenter__()
-        await self._mavsdk.add_any_connection(self.url)
-        system = await self._system(timeout)
+        mavsdk = self._mavsdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
+        await mavsdk.__aenter__()
+        await mavsdk.add_any_connection(self.url)
+        system = await self._system(mavsdk, timeout)
         if system is None:
             await self.close()
             raise TimeoutError(f"no vehicle answered on {self.url} within {timeout:g} s")
         self.action, self.telemetry, self.offboard = ActionAsync(system), TelemetryAsync(system), OffboardAsync(system)
-        self._queue = asyncio.Queue()
-        self._tasks = [asyncio.create_task(self._work())] + [
+        queue: asyncio.Queue = asyncio.Queue()
+        self._queue = queue
+        self._tasks = [asyncio.create_task(self._work(queue))] + [
             asyncio.create_task(self._follow(name))
             for name in ("position", "velocity_ned", "armed", "in_air", "flight_mode", "battery")
         ]
 
-    async def _system(self, timeout: float):
+    async def _system(self, mavsdk: Mavsdk, timeout: float):
         if self.sysid is None:
-            return await self._mavsdk.first_autopilot(timeout_s=timeout)
+            return await mavsdk.first_autopilot(timeout_s=timeout)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + timeout
         while loop.time() < deadline:
-            for system in await self._mavsdk.get_systems():
+            for system in await mavsdk.get_systems():
                 if await system.get_system_id() == self.sysid and await system.has_autopilot():
                     return system
             await asyncio.sleep(0.1)
@@ -264,7 +268,7 @@ class MavsdkAutopilot:
             await asyncio.sleep(0.05)
         await self.action.goto_location(lat, lon, amsl, float("nan"))
 
-    async def _work(self) -> None:
+    async def _work(self, queue: asyncio.Queue) -> None:
         """Send the commands in order. One the vehicle refuses (a reposition
         sent while it is still on the ground, a command lost on the link) is
         tried again until it holds, a newer command replaces it, or
@@ -272,14 +276,14 @@ class MavsdkAutopilot:
         hovering for the rest of the game."""
         loop = asyncio.get_running_loop()
         while True:
-            what, call, args = await self._queue.get()
+            what, call, args = await queue.get()
             give_up = loop.time() + RETRY_FOR
             while True:
                 try:
                     await call(*args)
                     break
                 except Exception as error:  # the vehicle refused or did not answer
-                    if not self._queue.empty() or loop.time() > give_up or what == "offboard":
+                    if not queue.empty() or loop.time() > give_up or what == "offboard":
                         self.failure = f"{what} failed: {error}"
                         log.warning("%s: %s", self.url, self.failure)
                         break

@@ -231,7 +231,7 @@ class Flight:
                 self.disarm()
                 self.note = "armed without takeoff: disarmed"
 
-    def _rtl_leg(self) -> np.ndarray:
+    def _rtl_leg(self) -> np.ndarray | None:
         """RTL: climb to the return altitude, fly home at it, then land."""
         p = self.body.position
         cruise = max(self.params.rtl_alt, p[2])

@@ -58,7 +58,7 @@ class Px4Face:
         self.sysid = sysid
         self.home = home
         self._due = dict.fromkeys(STREAMS, 0.0)
-        self._boot = None
+        self._boot: float | None = None
 
     # -------------------------------------------------------------- inbound
 

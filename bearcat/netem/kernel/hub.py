@@ -43,6 +43,7 @@ import socket
 import sys
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -50,6 +51,9 @@ from bearcat.netem.kernel.commands import KernelError, run
 from bearcat.netem.kernel.scheduler import Direction
 from bearcat.netem.link import LinkState, link_rng
 from bearcat.netem.profiles import ProfileError, load_profile
+
+if TYPE_CHECKING:
+    from netfilterqueue import NetfilterQueue
 
 QUEUE_LENGTH = 65536
 """Packets one queue may hold in the kernel before it drops: seconds of a busy link's traffic."""
@@ -64,7 +68,7 @@ class Hub:
         self.epoch: float | None = None
         self.directions: dict[int, Direction] = {}
         self.links: dict[str, tuple[Direction, Direction]] = {}
-        self.queues = []
+        self.queues: list[NetfilterQueue] = []
         self.held: list = []  # (release time, order, packet, is a copy)
         self.order = itertools.count()
         self.selector = selectors.DefaultSelector()

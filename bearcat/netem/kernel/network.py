@@ -40,7 +40,7 @@ from bearcat.netem.kernel.commands import KernelError, die_with_parent, inside, 
 
 log = logging.getLogger(__name__)
 
-BLOCK = ipaddress.ip_network("198.18.0.0/15")
+BLOCK = ipaddress.IPv4Network("198.18.0.0/15")
 MAX_PEERS = 63  # /30 links in a /24, the first one the launcher's
 LOCK = Path("/run/lock/bearcat-network.lock")
 CAP_NET_ADMIN, CAP_SYS_ADMIN = 12, 21
@@ -97,7 +97,7 @@ class KernelNetwork:
         self.seed = seed
         self.report = report
         self.profiles = profiles
-        self.hub: subprocess.Popen | None = None
+        self.hub: subprocess.Popen[bytes] | None = None
         self.netem = False  # whether this kernel has the netem qdisc (the hub impairs packets either way)
         self._links = 0
         self._subnet: ipaddress.IPv4Network | None = None
@@ -149,6 +149,7 @@ class KernelNetwork:
         """Start ``argv`` as peer ``name`` in a namespace of its own, linked
         to the hub (and impaired there unless ``impaired`` is False); it runs
         once its network is up."""
+        assert self.hub is not None, "a peer is spawned inside the with block"
         k = self._links = self._links + 1
         if k > MAX_PEERS:
             raise KernelError(f"a kernel network holds at most {MAX_PEERS} peers")
@@ -185,6 +186,7 @@ class KernelNetwork:
                 inside(child.pid, *command)
             if impaired:
                 self._ask({"link": name, "iface": f"p{k}", "queues": [2 * k, 2 * k + 1]})
+            assert child.stdin is not None  # a pipe
             child.stdin.write(b"go\n")
             child.stdin.close()
         except BaseException:
@@ -226,6 +228,7 @@ class KernelNetwork:
             return
         hub, self.hub = self.hub, None
         try:
+            assert hub.stdin is not None  # a pipe
             hub.stdin.close()
             hub.wait(timeout=STARTUP)
         except (OSError, subprocess.TimeoutExpired):
@@ -289,6 +292,7 @@ class KernelNetwork:
         raise KernelError("every /24 of 198.18.0.0/15 is routed already: too many kernel networks on this host")
 
     def _address(self, link: int, host: int) -> ipaddress.IPv4Address:
+        assert self._subnet is not None, "addresses are taken once the subnet is"
         return self._subnet.network_address + 4 * link + host
 
     def _wait_for_namespace(self, pid: int, name: str) -> None:
@@ -304,12 +308,14 @@ class KernelNetwork:
         raise KernelError(f"peer {name} never got a network namespace of its own (unshare --net failed?)")
 
     def _ask(self, command: dict) -> dict:
+        assert self.hub is not None and self.hub.stdin is not None, "the hub runs, its input a pipe"
         with self._asking:
             self.hub.stdin.write((json.dumps(command) + "\n").encode())
             self.hub.stdin.flush()
             return self._reply()
 
     def _reply(self) -> dict:
+        assert self.hub is not None and self.hub.stdout is not None, "the hub runs, its output a pipe"
         ready, _, _ = select.select([self.hub.stdout], [], [], STARTUP)
         if not ready:
             raise KernelError(f"the network hub did not answer within {STARTUP:g} s")

@@ -95,13 +95,13 @@ def area_gradient(
     a, b, owner = _boundary_edges(travel_times, safe)
     length = np.zeros(n)
     bounds: dict[int, _Boundary] = {}
-    for k in np.unique(owner):
+    for k in map(int, np.unique(owner)):
         sel = owner == k
         bounds[k] = _Boundary(travel_times, e, k, ps[k], speeds[k], ve, radius, safe, a[sel], b[sel])
         length[k] = bounds[k].length.sum()
     active = length >= _MIN_ACTIVE_CELLS * max(travel_times.spacing)
     grad = np.zeros((n, 2))
-    for k in np.flatnonzero(active):
+    for k in map(int, np.flatnonzero(active)):
         if method == "boundary":
             grad[k] = bounds[k].gradient()
         else:

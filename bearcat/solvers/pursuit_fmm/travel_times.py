@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
-from typing import TypeVar
+from typing import Any, TypeVar
 
 import numba
 import numpy as np
@@ -104,7 +104,7 @@ class TravelTimes:
         self.spacing = (float(grid.spacing[0]), float(grid.spacing[1]))
         self._cache_size = int(cache_size)
         self._fronts: OrderedDict[tuple[float, float], Front] = OrderedDict()
-        self._derived: tuple[Hashable, object] | None = None
+        self._derived: tuple[Hashable, Any] | None = None  # the key and what its build returned
 
     def travel_time(self, point) -> np.ndarray:
         """Arrival times of a front leaving ``point`` at speed factor 1 (divide

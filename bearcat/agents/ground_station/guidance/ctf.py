@@ -107,6 +107,7 @@ class CtfAdvisor:
         """Where ``player`` may be by ``now``, from its latest fix, rounded up to ``RADIUS_STEP``."""
         _, t, fix = fixes.latest[player]
         r = self.uncertainty.radius(player, now - t, fix.accuracy)
+        assert r is not None, f"the uncertainty knows the top speed of {player}"
         return float(np.ceil(r / RADIUS_STEP) * RADIUS_STEP)
 
     def answer_at(self, agent: str, a: np.ndarray, d: np.ndarray, radii=None) -> dict:
@@ -147,6 +148,7 @@ class CtfAdvisor:
 
     def _robust_answer(self, agent: str, a: np.ndarray, d: np.ndarray, radii) -> dict:
         robust = self.robust
+        assert robust is not None  # made for the agents given robust guidance, as this one is
         covers = {"attacker": robust.cover("attacker", a, radii[0]), "defender": robust.cover("defender", d, radii[1])}
         side = "attacker" if agent == self.attacker else "defender"
         answer = robust.answer(side, covers["attacker"], covers["defender"], self.phase)
@@ -174,6 +176,7 @@ class CtfAdvisor:
         held = self._regions.get(side)
         if held is None or held[0] != key:
             other = "defender" if side == "attacker" else "attacker"
+            assert self.robust is not None  # made for the agents given robust guidance, as this one is
             values = self.robust.region_values(other, self.robust.cover(side, where, coarse), self.phase)
             rings = on_the_wire(self.map, polygon_rings(self.solved.polygons(values, other)), self._simplify)
             held = self._regions[side] = (key, rings)

@@ -75,7 +75,7 @@ class ReachAvoidAdvisor:
         # defenders as last reported then; a defender's move shows at the
         # attacker's next fix. Robust answers are also redone each second.
         grown = [0.0] * len(self.defenders)
-        key = (self.stage, points[0].tobytes())
+        key: tuple = (self.stage, points[0].tobytes())
         if self.robust:
             grown = [self._radius(latest[d], d, now) for d in self.defenders]
             key += (int(now),)
@@ -85,7 +85,9 @@ class ReachAvoidAdvisor:
 
     def _radius(self, held, defender: str, now: float) -> float:
         _, t, fix = held
-        return self.uncertainty.radius(defender, now - t, fix.accuracy)
+        r = self.uncertainty.radius(defender, now - t, fix.accuracy)
+        assert r is not None, f"the uncertainty knows the top speed of {defender}"
+        return r
 
     def _answer(self, points, grown) -> dict:
         a, *others = (self._placeable(p) for p in points)

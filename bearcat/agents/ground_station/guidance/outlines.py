@@ -4,12 +4,17 @@ message's limits on lines and points per outline."""
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING, cast
+
 import contourpy
 import numpy as np
 import shapely
 
 from bearcat.bus.messages import OUTLINE_LINES, OUTLINE_POINTS
 from bearcat.maps import Map
+
+if TYPE_CHECKING:
+    from contourpy._contourpy import LineReturn_Separate
 
 
 def on_the_wire(game_map: Map, lines, tolerance: float = 0.25) -> list[list[tuple[float, float]]]:
@@ -41,5 +46,6 @@ def mask_rings(grid, mask: np.ndarray) -> list[np.ndarray]:
     if not mask.any():
         return []
     x, y = grid.axes()
-    lines = contourpy.contour_generator(x, y, mask.T.astype(float), line_type="Separate").lines(0.5)
+    generator = contourpy.contour_generator(x, y, mask.T.astype(float), line_type="Separate")
+    lines = cast("LineReturn_Separate", generator.lines(0.5))  # as line_type says
     return sorted((line for line in lines if len(line) >= 4), key=len, reverse=True)

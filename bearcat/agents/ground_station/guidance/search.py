@@ -65,6 +65,7 @@ class SearchAdvisor:
     def _defender_values(self, a: np.ndarray, radius: float) -> np.ndarray:
         """Over defender positions, the value against the worst of where the attacker may be."""
         robust = self.ctf.robust
+        assert robust is not None  # made for the agents given robust guidance, as this one is
         return robust.region_values("defender", robust.cover("attacker", self.ctf.placeable(a), radius), self.ctf.phase)
 
     def _possible(self) -> list:

@@ -18,6 +18,7 @@ when one of its side's UAVs detected it; the agent a UAV saw is alerted
 from __future__ import annotations
 
 from collections.abc import Iterable
+from typing import Any
 
 import numpy as np
 
@@ -62,7 +63,7 @@ class GuidanceService:
         self.period = 1.0 / rate
         self.ended = False
         self.sight = sight
-        self.subscriptions = (keys.every(game, "fix"), keys.state(game))
+        self.subscriptions: tuple[str, ...] = (keys.every(game, "fix"), keys.state(game))
         if sight is not None:
             self.subscriptions += (keys.every(game, "detection"),)
         self.fixes = LatestFixes(game_map)
@@ -89,7 +90,7 @@ class GuidanceService:
             if not self.fixes.take(message):
                 return []
             if self.known is not None:
-                self._share(message)
+                self._share(message, self.known)
             if message.agent in self._last:
                 return self._send([message.agent], now)
         elif isinstance(message, Detection) and self.known is not None:
@@ -124,21 +125,22 @@ class GuidanceService:
         due = [a for a in self.agents if now - self._last[a] >= self.period - 1e-9]
         return self._send(due, now)
 
-    def _share(self, fix: Fix) -> None:
-        """Tell whoever may know of ``fix``: its side; and, if it is in line of
-        sight of an opponent, that opponent, who is seen in turn."""
+    def _share(self, fix: Fix, known: dict[str, LatestFixes]) -> None:
+        """Tell whoever may know of ``fix`` (in ``known``, what each agent knows):
+        its side; and, if it is in line of sight of an opponent, that opponent,
+        who is seen in turn."""
         sight, mover = self.sight, fix.agent
         where = self.fixes.latest[mover][0]
         for viewer in self.agents:
             if sight.allies(viewer, mover):
-                self.known[viewer].take(fix)
+                known[viewer].take(fix)
                 continue
             held = self.fixes.latest.get(viewer)
             if held is None or mover in sight.uavs or not sight.sees(held[0], where):
                 continue
-            self.known[viewer].take(fix)
-            if mover in self.known:
-                self.known[mover].take(held[2])
+            known[viewer].take(fix)
+            if mover in known:
+                known[mover].take(held[2])
 
     def _send(self, agents, now: float) -> list[Send]:
         if self.ended or not agents:
@@ -147,7 +149,7 @@ class GuidanceService:
         out = []
         for agent in agents:
             fixes = self.fixes if self.known is None else self.known[agent]
-            fields = {"game": "none"}
+            fields: dict[str, Any] = {"game": "none"}
             if self.advisor is not None and self.aided.get(agent):
                 fields = self.advisor(agent, fixes, now)
             spotted = self.spotted.get(agent)
