@@ -33,6 +33,7 @@ packets, so a packet leaves within a millisecond or so of its time.
 from __future__ import annotations
 
 import argparse
+import functools
 import heapq
 import itertools
 import json
@@ -84,7 +85,7 @@ class Hub:
             self.directions[queue] = direction = Direction(f"{sender} -> {receiver}", state)
             pair.append(direction)
             nfq = NetfilterQueue()
-            nfq.bind(queue, lambda packet, d=direction: self._arrived(d, packet), max_len=QUEUE_LENGTH)
+            nfq.bind(queue, functools.partial(self._arrived, direction), max_len=QUEUE_LENGTH)
             self.queues.append(nfq)
             self.selector.register(nfq.get_fd(), selectors.EVENT_READ, nfq)
             run("iptables", "-t", "mangle", "-A", "FORWARD", match, iface, "-j", "NFQUEUE", "--queue-num", str(queue))
