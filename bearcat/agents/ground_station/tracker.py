@@ -278,7 +278,8 @@ class Tracker:
         w = state.mu[:, None] * T / np.maximum(c, 1e-300)[None, :]  # w[i, j] = P(was i | now j)
         x0 = w.T @ state.x
         d = state.x[None, :, :] - x0[:, None, :]  # [j, i, :]
-        P0 = np.einsum("ji,iab->jab", w.T, state.P) + np.einsum("ji,jia,jib->jab", w.T, d, d)
+        wd = w.T[:, :, None] * d
+        P0 = (w.T @ state.P.reshape(len(c), -1)).reshape(state.P.shape) + np.swapaxes(wd, 1, 2) @ d
         F, Q = self._model(dt)
         x = x0 @ F.T
         P = F @ P0 @ F.T + Q
@@ -287,17 +288,11 @@ class Tracker:
     def _model(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """The transition matrix and each mode's process noise over ``dt``."""
         g = self.gps
-        a = math.exp(-dt / g.tau)
         F = np.eye(SIZE)
         F[0, 2] = F[1, 3] = dt
-        F[4, 4] = F[5, 5] = a
-        Q = np.zeros((len(self._q), SIZE, SIZE))
-        for axis in (0, 1):
-            p, v, b = axis, 2 + axis, 4 + axis
-            Q[:, p, p] = self._q * dt**3 / 3.0
-            Q[:, p, v] = Q[:, v, p] = self._q * dt**2 / 2.0
-            Q[:, v, v] = self._q * dt
-            Q[:, b, b] = g.bias_sigma**2 * -math.expm1(-2.0 * dt / g.tau)
+        F[4, 4] = F[5, 5] = math.exp(-dt / g.tau)
+        kinematic = dt**3 / 3.0 * _PP + dt**2 / 2.0 * _PV + dt * _VV
+        Q = self._q[:, None, None] * kinematic + g.bias_sigma**2 * -math.expm1(-2.0 * dt / g.tau) * _BB
         return F, Q
 
     def _step(self, state: _State, f: _Observation) -> _State:
@@ -305,19 +300,18 @@ class Tracker:
         c, x, P = self._predict(state, f.t - state.t)
         g, s = self.gps, f.scale
         # Position: z = p + s b + s n.
-        H = np.zeros((2, SIZE))
-        H[0, 0] = H[1, 1] = 1.0
-        H[0, 4] = H[1, 5] = s
-        R = (s * s * g.noise_sigma**2 + _FLOOR) * np.eye(2)
-        nu = f.z[None, :] - x @ H.T  # (m, 2)
-        PH = P @ H.T  # (m, 6, 2)
-        S = H @ PH + R  # (m, 2, 2)
-        Si = np.linalg.inv(S)
+        r = s * s * g.noise_sigma**2 + _FLOOR
+        nu = f.z[None, :] - x[:, POSITION] - s * x[:, BIAS]  # (m, 2)
+        PH = P[:, :, POSITION] + s * P[:, :, BIAS]  # P H^T, (m, n, 2)
+        S = PH[:, POSITION, :] + s * PH[:, BIAS, :]  # H P H^T, (m, 2, 2)
+        a, b, d = S[:, 0, 0] + r, S[:, 0, 1], S[:, 1, 1] + r
+        det = a * d - b * b
+        Si = np.stack([np.stack([d, -b], axis=-1), np.stack([-b, a], axis=-1)], axis=-2) / det[:, None, None]
         K = PH @ Si
-        x = x + np.einsum("mab,mb->ma", K, nu)
+        x = x + (K @ nu[:, :, None])[:, :, 0]
         P = P - K @ np.swapaxes(PH, 1, 2)
-        maha = np.einsum("ma,mab,mb->m", nu, Si, nu)
-        loglik = -0.5 * maha - 0.5 * np.log(np.linalg.det(S)) - math.log(2.0 * math.pi)
+        maha = (nu[:, None, :] @ Si @ nu[:, :, None])[:, 0, 0]
+        loglik = -0.5 * maha - 0.5 * np.log(det) - math.log(2.0 * math.pi)
         if f.heading is not None:
             x, P, more = self._compass(c, x, P, f.heading)
             loglik = loglik + more
@@ -366,6 +360,19 @@ class Tracker:
         return x, P, loglik
 
 
+def _template(*pairs: tuple[int, int]) -> np.ndarray:
+    out = np.zeros((SIZE, SIZE))
+    for i, j in pairs:
+        out[i, j] = out[j, i] = 1.0
+    return out
+
+
+_PP, _PV, _VV, _BB = (
+    _template((0, 0), (1, 1)),
+    _template((0, 2), (1, 3)),
+    _template((2, 2), (3, 3)),
+    _template((4, 4), (5, 5)),
+)
 _FLOOR = 1e-6  # m^2: the least measurement variance, so an exact fix keeps the filter well posed
 _OUTLIER = 0.05  # the share of compass readings taken to say nothing of the motion
 
