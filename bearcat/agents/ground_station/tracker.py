@@ -5,15 +5,18 @@ Each ``Tracker`` estimates one player's position and velocity in map metres
 together with the phone's GPS bias, and predicts them to the moment guidance
 is computed.
 
-- State, per mode: ``x = [east, north, v_east, v_north, b_east, b_north]``.
+- State, per mode: ``x = [east, north, v_east, v_north, b_east, b_north, c]``.
   The bias ``b`` is bearcat's own GPS error model (``netem.models.GpsError``):
   a first-order Gauss-Markov process of standard deviation ``bias_sigma`` and
-  time constant ``tau``, plus white noise ``noise_sigma``.
+  time constant ``tau``, plus white noise ``noise_sigma``. ``c`` is the
+  compass's bias, drawn once per phone (``CompassError``): taken for white
+  noise it would make the velocity disagree steadily with the fixes, a drift
+  the GPS bias would be blamed for.
 - A fix at ``t`` measures ``z = p + s b + s n``, where ``s`` is the fix's
   reported accuracy over the model's steady-state sigma (1 in the open, the
   urban factor near buildings: the phone scales bias and noise alike). Its
   compass reading measures the direction of motion ``atan2(v_east, v_north)``
-  when the player moves; standing still it says nothing and is left out.
+  plus ``c`` when the player moves; standing still it says nothing and is left out.
 - Two motion modes, mixed by an interacting multiple model (IMM): walking, a
   nearly constant velocity whose white acceleration is what a person's
   wandering heading gives (``walker.HEADING_TAU``, the scenario's heading
