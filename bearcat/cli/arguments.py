@@ -1,7 +1,9 @@
-"""Parsers for the comma-separated values the commands take (``X,Y``, ``X,Y,R``).
+"""What several commands share: parsers for the values they take (``X,Y``,
+``X,Y,R``, seeds, counts), the options of a batch of trials, and the
+``Commands`` the command modules register into.
 
-They raise ``argparse.ArgumentTypeError`` so argparse reports the culprit
-option with exit code 2, like any other bad argument.
+The parsers raise ``argparse.ArgumentTypeError`` so argparse reports the
+culprit option with exit code 2, like any other bad argument.
 """
 
 from __future__ import annotations
@@ -87,6 +89,20 @@ def check_seeds(first: int, count: int) -> None:
     """Seeds ``first`` to ``first + count - 1`` must all be seeds."""
     if first + count - 1 > MAX_SEED:
         raise UsageError(f"--seed {first} with {count} trials runs past the largest seed, {MAX_SEED}")
+
+
+def add_batch_options(parser: argparse.ArgumentParser, what: str) -> None:
+    """Where a batch runs its ``what``: ``--workers N`` local processes or,
+    instead, ``--cluster ADDRESS``, a Dask cluster's scheduler. One spelling
+    for every command that runs a batch (``studies.batch``)."""
+    where = parser.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=count, metavar="N", help="local worker processes (default: one per core)")
+    where.add_argument(
+        "--cluster",
+        metavar="tcp://HOST:PORT",
+        help=f"run the {what} on the Dask cluster whose scheduler listens there, instead of on this machine "
+        "(pip install 'bearcat[cluster]' on every machine)",
+    )
 
 
 class Commands:

@@ -21,7 +21,7 @@ from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import writing
 from bearcat.maps import list_maps
-from bearcat.studies.batch import BatchInterrupted, run_batch
+from bearcat.studies.batch import run_batch
 from bearcat.studies.pursuit_experiment import PursuitSetup, run_trial, summarise, trial_tasks
 
 DEFAULT_DOMAINS = ("square-10", "triangle-10", "maze-10")
@@ -51,8 +51,7 @@ def register(commands: Commands) -> None:
         "--trials", type=int, default=500, metavar="K", help="trials per domain and pursuer count (default 500)"
     )
     p.add_argument("--seed", type=arguments.seed, default=0, help="seed of the whole run (default 0)")
-    p.add_argument("--workers", type=int, metavar="N", help="local worker processes (default: one per core)")
-    p.add_argument("--scheduler", metavar="tcp://HOST:PORT", help="run the trials on this Dask cluster instead")
+    arguments.add_batch_options(p, "trials")
     p.add_argument(
         "--out",
         type=Path,
@@ -95,17 +94,14 @@ def run_pursuit(args) -> int:
     with writing(args.out, "run directory"):
         _check_setup(args.out, {"seed": args.seed, **asdict(setup)})
         with counting(len(tasks), "trials", "trial") as finished:
-            try:
-                results = run_batch(
-                    tasks,
-                    run_trial,
-                    args.out / "trials.jsonl",
-                    workers=args.workers,
-                    scheduler=args.scheduler,
-                    on_result=finished,
-                )
-            except BatchInterrupted as exc:
-                raise arguments.UsageError(str(exc)) from None
+            results = run_batch(
+                tasks,
+                run_trial,
+                args.out / "trials.jsonl",
+                workers=args.workers,
+                scheduler=args.cluster,
+                on_result=finished,
+            )
         wanted = {t["key"] for t in tasks}
         table = summarise([r for k, r in results.items() if k in wanted], args.domain, args.pursuers)
         (args.out / "table.json").write_text(json.dumps(table, indent=2) + "\n")

@@ -65,6 +65,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from bearcat.scenarios.faults import FaultError
     from bearcat.scenarios.schema import ScenarioError
     from bearcat.solvers.errors import InputError
+    from bearcat.studies.batch import BatchInterrupted
 
     return (
         UsageError,
@@ -77,6 +78,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
         ProfileError,
         KernelError,
         BusError,
+        BatchInterrupted,
         FileNotFoundError,
         IsADirectoryError,
         PermissionError,
