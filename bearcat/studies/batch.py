@@ -16,13 +16,21 @@ import json
 import logging
 import os
 from collections.abc import Callable, Iterable
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from concurrent.futures import CancelledError, ProcessPoolExecutor, as_completed
 from concurrent.futures.process import BrokenProcessPool
 from pathlib import Path
 
 log = logging.getLogger(__name__)
 
 __all__ = ["BatchInterrupted", "read_results", "run_batch"]
+
+SAME_EVERYWHERE = ("bearcat", "numpy", "numba")
+"""The packages a trial's numbers depend on, which every machine of a Dask
+cluster must have in this machine's versions for its results to be a local
+run's (the solvers' cache keys hash them for the same reason)."""
+
+CONNECT_TIMEOUT = 10
+"""Seconds to wait for a Dask scheduler to answer."""
 
 
 class BatchInterrupted(RuntimeError):
@@ -58,9 +66,10 @@ def run_batch(
     """Run ``work(task)`` for every task whose key is not yet in ``out`` and
     return all results by key, old and new. ``workers`` bounds the local
     process pool (default: the CPU count); ``scheduler`` (``tcp://host:port``)
-    sends the tasks to a Dask cluster instead, whose workers must be able to
-    import ``work``. ``on_result`` is called once per finished task, old ones
-    included, for a progress display."""
+    sends the tasks to a Dask cluster instead, whose scheduler and workers
+    must be able to import ``work`` (the scheduler reads the tasks too) and
+    run this machine's versions of ``SAME_EVERYWHERE``. ``on_result`` is
+    called once per finished task, old ones included, for a progress display."""
     tasks = list(tasks)
     keys = [t["key"] for t in tasks]
     if len(set(keys)) != len(keys):
@@ -119,26 +128,70 @@ def _run_local(todo, work, workers, record, out) -> None:
 
 
 def _run_dask(todo, work, scheduler, record, out) -> None:
-    try:
-        from distributed import Client
-        from distributed import as_completed as dask_completed
-    except ImportError:
-        raise BatchInterrupted(
-            "a Dask scheduler was given but the 'distributed' package is not installed; pip install 'bearcat[cluster]'"
-        ) from None
-    try:
-        client = Client(scheduler, timeout="10s")
-    except (OSError, TimeoutError) as exc:
-        raise BatchInterrupted(f"cannot reach the Dask scheduler at {scheduler}: {exc}") from None
-    with client:
+    distributed = _distributed()
+    with _connect(distributed.Client, scheduler) as client:
+        _check_versions(client, scheduler)
         futures = client.map(work, todo, pure=False)
         try:
-            for future in dask_completed(futures):
+            for future in distributed.as_completed(futures):
                 record(future.result())
-        except (OSError, TimeoutError) as exc:
+        except (OSError, TimeoutError, CancelledError, distributed.KilledWorker) as exc:
             raise BatchInterrupted(
                 f"the Dask cluster at {scheduler} failed ({exc}); the finished trials are kept in {out}, "
                 "run the same command again to resume"
             ) from None
         finally:
             client.cancel(futures)
+
+
+def _distributed():
+    """Dask's ``distributed``, an optional dependency (the ``cluster`` extra)."""
+    try:
+        import distributed
+    except ImportError:
+        raise BatchInterrupted(
+            "a Dask scheduler was given but the 'distributed' package is not installed; pip install 'bearcat[cluster]'"
+        ) from None
+    return distributed
+
+
+def _connect(client, scheduler: str):
+    """A Dask client of the scheduler at ``scheduler``, or one sentence saying why not."""
+    try:
+        return client(scheduler, timeout=f"{CONNECT_TIMEOUT}s")
+    except ValueError as exc:
+        raise BatchInterrupted(
+            f"{scheduler!r} is not a Dask scheduler's address ({exc}); it reads tcp://HOST:PORT"
+        ) from None
+    except (OSError, TimeoutError):
+        raise BatchInterrupted(
+            f"no Dask scheduler answered at {scheduler} within {CONNECT_TIMEOUT} s; "
+            "is 'dask scheduler' running there, with its port open to this machine?"
+        ) from None
+
+
+def _check_versions(client, scheduler: str) -> None:
+    """Refuse a cluster whose scheduler or workers run other versions of
+    ``SAME_EVERYWHERE`` than this machine: their trials could differ from
+    a local run's, and a scheduler without bearcat cannot even read the
+    tasks. Workers that join later are not asked."""
+    versions = client.get_versions(packages=list(SAME_EVERYWHERE))
+    mine = _wanted(versions["client"])
+    machines = {f"scheduler at {scheduler}": versions["scheduler"]}
+    machines |= {f"worker at {worker}": found for worker, found in versions["workers"].items()}
+    for machine, found in machines.items():
+        theirs = _wanted(found)
+        differ = [name for name in SAME_EVERYWHERE if theirs[name] != mine[name]]
+        if differ:
+            raise BatchInterrupted(
+                f"the Dask {machine} has {_listed(theirs, differ)} where this machine has {_listed(mine, differ)}; "
+                "install the same versions on every machine"
+            )
+
+
+def _wanted(versions: dict) -> dict[str, str | None]:
+    return {name: versions["packages"].get(name) for name in SAME_EVERYWHERE}
+
+
+def _listed(versions: dict[str, str | None], names: list[str]) -> str:
+    return ", ".join(f"{name} {versions[name] or '(not installed)'}" for name in names)
