@@ -2,6 +2,11 @@
 games, resumable, with a table and a figure at the end (``DIR/results.jsonl``
 per game, ``DIR/summary.json``, ``DIR/STUDY.png``).
 
+``--cluster tcp://HOST:PORT`` plays the games on a Dask cluster instead of
+this machine's cores, with the same results file and the same results: each
+game carries its seed, and each worker solves or loads the scenario's sets
+in its own machine's cache.
+
 ``--human defender`` plays the study's games live instead, one after the
 other, with a person driving the defender from the keyboard; each game is
 appended to the same results file, under its own labels, so people's results
@@ -37,7 +42,7 @@ def register(commands: Commands) -> None:
         choices=TRANSPORTS,
         help="transports to compare (default: each scenario's own): tcp, udp or both",
     )
-    p.add_argument("--workers", type=int, metavar="N", help="worker processes (default: one per core)")
+    arguments.add_batch_options(p, "games")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
     p.add_argument(
         "--human",
@@ -53,9 +58,7 @@ def register(commands: Commands) -> None:
 
 
 def run(args) -> int:
-    from bearcat.cli.presolve import presolve
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.schema import load_scenario
     from bearcat.studies.batch import read_results, run_batch
     from bearcat.studies.thesis import play_task, study_tasks
 
@@ -65,15 +68,16 @@ def run(args) -> int:
         raise arguments.UsageError("--trials must be at least 1")
     if args.human is not None and args.study != "fake-out":
         raise arguments.UsageError(f"--human plays the fake-out study; {args.study} has no human side")
+    if args.human is not None and args.cluster is not None:
+        raise arguments.UsageError("--human plays its games live on this machine; it takes no --cluster")
     arguments.check_seeds(args.seed, args.trials)
     report = Output(args.json)
     out = args.out or Path("studies") / args.study
     make_directory(out, "results directory")
-    study = STUDIES[args.study]
-    # Solve each scenario's game once here, so the workers only load it.
-    for name in dict.fromkeys(cell.scenario for cell in study.cells):
-        scenario = load_scenario(name)
-        presolve(scenario, scenario.netem)
+    if args.cluster is None:
+        _presolve(STUDIES[args.study])
+    else:
+        report.say(f"playing on the Dask cluster at {args.cluster}; each machine solves the sets on its first game")
     with writing(out, "results directory"):
         if args.human is not None:
             from bearcat.studies.human_trials import play_human_trials
@@ -83,7 +87,14 @@ def run(args) -> int:
         else:
             tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
             with counting(len(tasks), args.study, "game") as finished:
-                results = run_batch(tasks, play_task, out / "results.jsonl", workers=args.workers, on_result=finished)
+                results = run_batch(
+                    tasks,
+                    play_task,
+                    out / "results.jsonl",
+                    workers=args.workers,
+                    scheduler=args.cluster,
+                    on_result=finished,
+                )
             wanted = {t["key"] for t in tasks}
             results = {k: r for k, r in results.items() if k in wanted}
         rows = summary_rows(args.study, results.values())
@@ -95,6 +106,20 @@ def run(args) -> int:
     report.figure(FIGURES[args.study](rows), out / f"{args.study}.png", dpi=110)
     report.json(rows)
     return 0
+
+
+def _presolve(study) -> None:
+    """Solve each scenario's game once here, with progress bars, so the
+    local worker processes only load it. A cluster's workers have no use
+    for this machine's cache: each solves a game on its first game of it,
+    or loads it from its own machine's cache, one worker at a time per
+    machine (``ctf_cache.load_or_solve``)."""
+    from bearcat.cli.presolve import presolve
+    from bearcat.scenarios.schema import load_scenario
+
+    for name in dict.fromkeys(cell.scenario for cell in study.cells):
+        scenario = load_scenario(name)
+        presolve(scenario, scenario.netem)
 
 
 def summary_rows(study: str, results) -> list[dict]:
