@@ -136,8 +136,9 @@ def _run_dask(todo, work, scheduler, record, out) -> None:
             for future in distributed.as_completed(futures):
                 record(future.result())
         except (OSError, TimeoutError, CancelledError, distributed.KilledWorker) as exc:
+            why = " ".join(str(exc).split())  # Dask's messages run over several lines
             raise BatchInterrupted(
-                f"the Dask cluster at {scheduler} failed ({exc}); the finished trials are kept in {out}, "
+                f"the Dask cluster at {scheduler} failed ({why}); the finished trials are kept in {out}, "
                 "run the same command again to resume"
             ) from None
         finally:
