@@ -22,6 +22,7 @@ from pathlib import Path
 import pytest
 
 from bearcat import __version__ as bearcat_version
+from bearcat.netem.kernel.commands import die_with_parent
 
 pytestmark = pytest.mark.xdist_group("cluster")  # one cluster for the module, in one xdist worker
 
@@ -41,9 +42,18 @@ def bearcat(*words, env=None, timeout=300):
 
 def start(words, logs: Path, name: str, **options) -> subprocess.Popen:
     """A process of its own session (so stopping it stops its children),
-    logging to ``logs/name.log``."""
-    log = (logs / f"{name}.log").open("w")
-    return subprocess.Popen(words, stdout=log, stderr=subprocess.STDOUT, cwd=logs, start_new_session=True, **options)
+    logging to ``logs/name.log``, that dies with the tests however they end
+    (a worker's process dies with the nanny that started it)."""
+    with (logs / f"{name}.log").open("w") as log:
+        return subprocess.Popen(
+            words,
+            stdout=log,
+            stderr=subprocess.STDOUT,
+            cwd=logs,
+            start_new_session=True,
+            preexec_fn=die_with_parent,
+            **options,
+        )
 
 
 def stop(process: subprocess.Popen) -> None:
