@@ -22,6 +22,7 @@ Name = Annotated[str, msgspec.Meta(pattern=NAME_PATTERN, description="1 to 64 le
 Latitude = Annotated[float, msgspec.Meta(ge=-90.0, le=90.0)]
 Longitude = Annotated[float, msgspec.Meta(ge=-180.0, le=180.0)]
 Heading = Annotated[float, msgspec.Meta(ge=0.0, lt=360.0)]
+HalfTurn = Annotated[float, msgspec.Meta(ge=0.0, lt=180.0)]
 Time = Annotated[float, msgspec.Meta(ge=0.0, le=1e12)]
 Metres = Annotated[float, msgspec.Meta(ge=0.0, le=1e7)]
 Altitude = Annotated[float, msgspec.Meta(ge=-1e4, le=1e5)]
@@ -86,13 +87,19 @@ class Report(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
     """An agent as the guidance saw it: its last delivered fix and that fix's
     time; ``radius`` (metres) bounds where it may be by the guidance's time,
     its top speed times the fix's age plus the fix's 95 % error (None where
-    the ground station does not know its top speed)."""
+    the ground station does not know its top speed). Where calibrated
+    guidance tracks the agent, ``predicted`` is where the tracker believes
+    it is at the guidance's time (``[lon, lat]``) and ``ellipse`` that
+    belief's 95 % ellipse: semi-major and semi-minor axes in metres and the
+    major axis's bearing in degrees clockwise from north, in [0, 180)."""
 
     agent: Name
     t: Time
     lat: Latitude
     lon: Longitude
     radius: Metres | None = None
+    predicted: Point | None = None
+    ellipse: tuple[Metres, Metres, HalfTurn] | None = None
 
 
 class Guidance(Message, tag="guidance", frozen=True):
@@ -111,7 +118,10 @@ class Guidance(Message, tag="guidance", frozen=True):
     every one of those places; ``uncertain`` that the answer, robust to where
     the players may be (each report's ``radius``), differs from the one the
     positions as reported would give; ``seen_by`` the opponents' UAVs that
-    have just seen this agent.
+    have just seen this agent. With calibrated guidance, ``margin`` (metres)
+    is what the attacker's ``go`` added to ``value`` before it said go:
+    the measured quantile of the value's error at the reports' age, so that
+    a go is wrong at most as often as the scenario allows.
 
     Every point of ``region``, ``boundary`` and ``possible`` is a WGS84
     ``[lon, lat]`` pair, GeoJSON's order (RFC 7946), as in the maps: a ring
@@ -131,13 +141,16 @@ class Guidance(Message, tag="guidance", frozen=True):
     possible: Lines = []
     worst_case: bool = False
     uncertain: bool = False
+    margin: float | None = None
     seen_by: Annotated[list[Name], msgspec.Meta(max_length=64)] = []
     note: Text = ""
 
     def __post_init__(self):
         super().__post_init__()
-        if self.value is not None and not math.isfinite(self.value):
-            raise ValueError("value must be finite")
+        for name in ("value", "margin"):
+            number = getattr(self, name)
+            if number is not None and not math.isfinite(number):
+                raise ValueError(f"{name} must be finite")
         for name in ("region", "boundary", "possible"):
             points = sum(len(line) for line in getattr(self, name))
             if points > OUTLINE_POINTS:

@@ -39,6 +39,7 @@ COMMANDS = {
     "peer": (("live",), "start one peer by hand (a person at a keyboard, or against real hardware)"),
     "phone": (("live",), "let a person play from a real phone's browser"),
     "certs": (("certs",), "make the certificates a guarded game's peers present"),
+    "calibrate": (("calibrate",), "measure, on simulated games, the margin calibrated guidance adds to its value"),
     "study": (
         ("study",),
         "the fake-out, go/no-go and UAV search studies of thesis 3.5 and 6.2.4, as batches of simulated games",

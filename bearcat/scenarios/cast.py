@@ -9,6 +9,7 @@ and the agent's name, so adding an agent does not change another's draws.
 from __future__ import annotations
 
 import functools
+import logging
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -32,7 +33,10 @@ from bearcat.agents.ground_station.guidance import (
     ReachAvoidAdvisor,
     SearchAdvisor,
 )
+from bearcat.agents.ground_station.calibration import Calibration
+from bearcat.agents.ground_station.calibration_store import load_calibration
 from bearcat.agents.ground_station.guidance.fixes import Uncertainty
+from bearcat.agents.ground_station.tracker import Motion, Trackers
 from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.agents.ground_station.sight import Sight
 from bearcat.agents.ground_station.uav_tasking import Uav, UavTasker
@@ -47,6 +51,8 @@ from bearcat.agents.uav.autopilot import SimulatedAutopilot
 from bearcat.netem.profiles import Profile
 from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
 from bearcat.solvers.ctf_queries import CtfQueries
+
+log = logging.getLogger(__name__)
 
 STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
 _Rules = TypeVar("_Rules", CtfRules, ReachAvoidRules, PursuitRules)
@@ -162,7 +168,7 @@ def build_cast(
     if judge not in ("truth", "fixes"):
         raise ScenarioError(f"the referee judges on truth or fixes, not {judge!r}")
     tasking = [game.tasker()] if scenario.uavs and isinstance(game, _CtfGame) else []
-    guidance = game.guidance(ctf_progress)
+    guidance = game.guidance(profile, ctf_progress)
     adopt = game.adopt if isinstance(game, _CtfGame) and game.awaited is not None else None
     referee = game.referee(on_truth=judge == "truth")
     starts = {a.id: a.start for a in scenario.agents}
@@ -279,21 +285,44 @@ class _CtfGame:
         )
         return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth, rejoin=self.scenario.lease)
 
-    def guidance(self, progress=None) -> GuidanceService:
+    def guidance(self, profile: Profile, progress=None) -> GuidanceService:
         s = self.scenario
+        methods = {a.id: s.uncertainty_of(a) for a in s.agents}
+        calibrated = "calibrated" in methods.values()
         self._advisor = CtfAdvisor(
             s.map,
             self.solved(progress),
             attacker=self.attacker.id,
             defender=self.defender.id,
             phase=self.phase,
-            robust=[a.id for a in s.agents if s.robust(a)],
+            methods=methods,
             uncertainty=_uncertainty(s),
+            calibration=self.calibration(profile) if calibrated else None,
+            alpha=s.alpha,
+            defender_quantile=s.defender_quantile,
         )
         advisor: CtfAdvisor | SearchAdvisor = self._advisor
         if s.uavs:
             advisor = SearchAdvisor(self._advisor, self.tasker(), self.sight.side("attacker"))
-        return _service(s, advisor, sight=self.sight if self.sight.line_of_sight or s.uavs else None)
+        sight = self.sight if self.sight.line_of_sight or s.uavs else None
+        return _service(s, advisor, sight=sight, tracking=tracking(s, profile) if calibrated else None)
+
+    def calibration(self, profile: Profile) -> Calibration | None:
+        """The game's calibration on ``profile``, if ``bearcat calibrate`` made one; if not, the log says so."""
+        s = self.scenario
+        found = load_calibration(self.own(), profile, s.alpha)
+        if found is None:
+            log.warning(
+                "%s: no calibration of map %s on profile %s at alpha %g yet: calibrated guidance takes its margin "
+                "from the tracker's belief until 'bearcat calibrate %s --netem %s' has run",
+                s.name,
+                s.map.name,
+                profile.name,
+                s.alpha,
+                s.name,
+                profile.name,
+            )
+        return found
 
     def tasker(self) -> UavTasker:
         """The tasking of the attacking side's UAVs (thesis 6.2 searches for
@@ -387,7 +416,7 @@ class _PursuitGame:
         )
         return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth, rejoin=self.scenario.lease)
 
-    def guidance(self, progress=None) -> GuidanceService:
+    def guidance(self, profile: Profile, progress=None) -> GuidanceService:
         s = self.scenario
         advisor = PursuitAdvisor(s.map, evader=self.evader.id, pursuers=[p.id for p in self.pursuers])
         return _service(s, advisor)
@@ -433,7 +462,7 @@ class _ReachAvoidGame:
         )
         return Referee(self.scenario.name, self.scenario.map, contest, on_truth=on_truth, rejoin=self.scenario.lease)
 
-    def guidance(self, progress=None) -> GuidanceService:
+    def guidance(self, profile: Profile, progress=None) -> GuidanceService:
         s = self.scenario
         xmin, ymin, xmax, ymax = s.map.bounds
         advisor = ReachAvoidAdvisor(
@@ -444,7 +473,7 @@ class _ReachAvoidGame:
             speeds={a.id: a.speed for a in s.agents},
             capture_radius=self.radius,
             spacing=self.table.spacing or max(xmax - xmin, ymax - ymin) / 200,
-            robust=s.robust(self.attacker),
+            robust=s.uncertainty_of(self.attacker) == "worst-case",
             uncertainty=_uncertainty(s),
         )
         return _service(s, advisor)
@@ -457,7 +486,7 @@ class _ReachAvoidGame:
         return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture")
 
 
-def _service(scenario: Scenario, advisor, sight=None) -> GuidanceService:
+def _service(scenario: Scenario, advisor, sight=None, tracking=None) -> GuidanceService:
     """The guidance service of ``scenario`` with ``advisor`` for its aided agents."""
     return GuidanceService(
         scenario.name,
@@ -468,7 +497,16 @@ def _service(scenario: Scenario, advisor, sight=None) -> GuidanceService:
         rate=scenario.guidance_rate,
         sight=sight,
         uncertainty=_uncertainty(scenario),
+        tracking=tracking,
     )
+
+
+def tracking(scenario: Scenario, profile: Profile) -> Callable[[], Trackers]:
+    """Makes the trackers of calibrated guidance: the profile's GPS and
+    compass, and each person's motion from their speed, heading error and
+    report rate (UAVs get the default)."""
+    motions = {a.id: Motion.of(a.speed, a.heading_error, 1.0 / a.fix_rate) for a in scenario.agents}
+    return functools.partial(Trackers, scenario.map, profile.gps, profile.compass, motions=motions)
 
 
 def _uncertainty(scenario: Scenario) -> Uncertainty:

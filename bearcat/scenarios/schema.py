@@ -18,8 +18,9 @@ whether their phone shows reachability guidance::
 
     [guidance]
     rate = 10.0                  # Hz, per agent
-    robust = true                # answers hold wherever stale, noisy fixes allow the players to be
-    confidence = 0.95            # of a fix's GPS error circle they guard against (0: its age only)
+    uncertainty = "calibrated"   # none | worst-case | calibrated: how stale, noisy fixes are answered for
+    alpha = 0.01                 # calibrated: the share of goes the margin lets be wrong
+    confidence = 0.95            # worst-case: of a fix's GPS error circle the disks hold (0: its age only)
 
     [[agent]]
     id = "attacker"
@@ -28,7 +29,7 @@ whether their phone shows reachability guidance::
     speed = 3.0                  # top speed, m/s on full-speed terrain
     behaviour = "fake-out"
     aided = true
-    robust = false               # optional: this agent's guidance against guidance.robust
+    uncertainty = "none"         # optional: this agent's own, instead of guidance.uncertainty
 
     [[uav]]                      # optional: quadrotors flying for a team (thesis 6.2)
     id = "q1"
@@ -81,6 +82,19 @@ if TYPE_CHECKING:
     ProfileName = str  # read from the profiles file: checked when a scenario is read
 else:
     ProfileName = Literal[tuple(load_profiles())]
+Uncertainty = Literal["none", "worst-case", "calibrated"]
+UNCERTAINTIES: tuple[Uncertainty, ...] = get_args(Uncertainty)
+"""How guidance answers for positions the network delivered stale and noisy:
+``none`` at the reports as they are (the thesis's guidance); ``worst-case``
+against every place the disks round the fixes allow; ``calibrated`` where a
+tracker predicts the players are now, with a margin measured on simulated
+games (``bearcat calibrate``)."""
+GAME_UNCERTAINTIES: dict[Game, tuple[Uncertainty, ...]] = {
+    "ctf": UNCERTAINTIES,
+    "reach-avoid": ("none", "worst-case"),
+    "pursuit": ("none",),
+}
+"""The forms each game's guidance has; the last is a scenario's default."""
 Transport = Literal["tcp", "udp"]
 TRANSPORTS: tuple[Transport, ...] = get_args(Transport)
 """How best-effort messages (fixes, guidance) travel in live runs; reliable ones always go over tcp."""
@@ -171,7 +185,7 @@ class AgentSpec(_Table, tag_field="behaviour", frozen=True):
     start: Point
     speed: WalkingSpeed
     aided: bool = True
-    robust: bool | None = None  # robust guidance for this agent; None: the scenario's guidance.robust
+    uncertainty: Uncertainty | None = None  # this agent's guidance; None: the scenario's guidance.uncertainty
     fix_rate: Rate = 1.0
     reaction: Annotated[float, Meta(ge=0.0, le=10.0, extra={"unit": "s"})] = 0.4  # from a display change to a turn
     heading_error: Angle = 10.0  # standard deviation of following a displayed heading
@@ -290,13 +304,21 @@ class ScenarioTable(_Table, frozen=True):
 
 class GuidanceTable(_Table, frozen=True):
     rate: Rate = 10.0
-    # Answers that hold wherever the players may be, not only at their reports
-    # (capture-the-flag, search and reach-avoid guidance; pursuit has no robust form).
-    robust: bool = True
-    # The share of a fix's GPS error the robust answers guard against (the
-    # radius of its 95 % circle by default); 0: only how far an agent may
-    # have moved since its fix.
+    # How answers treat stale, noisy fixes (UNCERTAINTIES); None: the best
+    # form the game has (GAME_UNCERTAINTIES): calibrated for capture-the-flag,
+    # worst-case for reach-avoid, none for pursuit.
+    uncertainty: Uncertainty | None = None
+    # worst-case: the share of a fix's GPS error the disks hold (the radius
+    # of its 95 % circle by default); 0: only how far an agent may have
+    # moved since its fix.
     confidence: Annotated[float, Meta(ge=0.0, le=0.999)] = 0.95
+    # calibrated: the attacker's go holds when the value plus the margin
+    # measured at this level is below zero, so at most this share of goes
+    # are wrong about the state they were made in.
+    alpha: Annotated[float, Meta(gt=0.0, le=0.5)] = 0.01
+    # calibrated: the share of the tracker's belief the defender's heading
+    # is allowed to lose against; 0.5 acts on the median value.
+    defender_quantile: Annotated[float, Meta(gt=0.0, lt=1.0)] = 0.5
 
 
 class ScenarioFile(_Table, frozen=True):
@@ -320,7 +342,7 @@ class Scenario:
     seed: int
     rules: CtfRules | ReachAvoidRules | PursuitRules
     guidance_rate: float
-    robust_guidance: bool
+    uncertainty: str  # the scenario's guidance.uncertainty, its game's default filled in
     guidance_confidence: float
     agents: tuple[AgentSpec, ...]
     description: str
@@ -329,13 +351,15 @@ class Scenario:
     uavs: tuple[UavSpec, ...]
     lease: float = 10.0  # s a silent peer's liveliness outlives it
     faults: tuple = ()  # the scenario's own fault plan (scenarios.faults)
+    alpha: float = 0.01  # calibrated: the false-go share the margin allows
+    defender_quantile: float = 0.5  # calibrated: the share of the belief the defender may lose against
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
 
-    def robust(self, agent: AgentSpec) -> bool:
-        """Whether ``agent``'s guidance is robust: its own setting, else the scenario's."""
-        return self.robust_guidance if agent.robust is None else agent.robust
+    def uncertainty_of(self, agent: AgentSpec) -> str:
+        """How ``agent``'s guidance treats stale, noisy fixes: its own setting, else the scenario's."""
+        return self.uncertainty if agent.uncertainty is None else agent.uncertainty
 
     def team(self, name: str) -> list[AgentSpec]:
         return [a for a in self.agents if a.team == name]
@@ -388,6 +412,7 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
     except RecursionError:
         raise ScenarioError(f"{source} nests arrays or tables too deeply to be a scenario") from None
     try:
+        _check_renamed(data)
         file = convert(data, ScenarioFile)
         head = file.scenario
         rules = convert(file.rules, RULES[head.game], at="rules")
@@ -410,8 +435,10 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         seed=head.seed,
         rules=rules,
         guidance_rate=file.guidance.rate,
-        robust_guidance=file.guidance.robust,
+        uncertainty=file.guidance.uncertainty or GAME_UNCERTAINTIES[head.game][-1],
         guidance_confidence=file.guidance.confidence,
+        alpha=file.guidance.alpha,
+        defender_quantile=file.guidance.defender_quantile,
         agents=file.agent,
         description=head.description,
         text=text,
@@ -420,6 +447,29 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         lease=head.lease,
         faults=file.fault,
     )
+
+
+def _check_uncertainty(file: ScenarioFile) -> None:
+    """Each agent's guidance asks only for a form its game's guidance has."""
+    game = file.scenario.game
+    offered = GAME_UNCERTAINTIES[game]
+    asked = [("guidance.uncertainty", file.guidance.uncertainty)]
+    asked += [(f"agent[{k}].uncertainty", agent.uncertainty) for k, agent in enumerate(file.agent)]
+    for path, form in asked:
+        if form is not None and form not in offered:
+            raise Invalid(path, f"{game} guidance has no {form!r} form; it has {', '.join(map(repr, offered))}")
+
+
+def _check_renamed(data: dict) -> None:
+    """A key an older bearcat read, named with what replaced it."""
+    replaced = "was replaced by {}uncertainty: \"worst-case\" for true, \"none\" for false"
+    guidance = data.get("guidance")
+    if isinstance(guidance, dict) and "robust" in guidance:
+        raise Invalid("guidance.robust", replaced.format("guidance."))
+    agents = data.get("agent")
+    for k, agent in enumerate(agents if isinstance(agents, list) else ()):
+        if isinstance(agent, dict) and "robust" in agent:
+            raise Invalid(f"agent[{k}].robust", replaced.format(f"agent[{k}]."))
 
 
 def _check_against(file: ScenarioFile, rules, game_map: Map) -> None:
@@ -457,6 +507,7 @@ def _check_against(file: ScenarioFile, rules, game_map: Map) -> None:
             f"2 to {MAX_CELLS} are allowed",
         )
     check_faults(file.fault, file.agent, file.uav)
+    _check_uncertainty(file)
     ids = [a.id for a in file.agent] + [u.id for u in file.uav]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:

@@ -127,16 +127,36 @@ class Belief:
         largest = float(np.linalg.eigvalsh(self.position_covariance)[-1])
         return math.sqrt(-2.0 * math.log1p(-confidence) * max(largest, 0.0))
 
+    def ellipse(self, confidence: float = 0.95) -> tuple[float, float, float]:
+        """The ellipse holding the player with probability ``confidence``,
+        the position taken as Gaussian with the mixture's covariance: its
+        semi-major and semi-minor axes (metres) and the major axis's
+        bearing (degrees clockwise from north, in [0, 180))."""
+        scale = -2.0 * math.log1p(-confidence)
+        eigenvalues, vectors = np.linalg.eigh(self.position_covariance)
+        minor, major = (math.sqrt(scale * max(float(e), 0.0)) for e in eigenvalues)
+        east, north = vectors[:, 1]
+        return major, minor, math.degrees(math.atan2(east, north)) % 180.0
+
     def sample(self, rng: np.random.Generator, n: int) -> np.ndarray:
         """``n`` positions (n x 2, map metres) drawn from the mixture."""
-        modes = rng.choice(len(self.weights), size=n, p=self.weights / self.weights.sum())
-        out = np.empty((n, 2))
+        return self.draw(rng.standard_normal((n, 2)), rng.random(n))
+
+    def draw(self, normals: np.ndarray, uniforms: np.ndarray) -> np.ndarray:
+        """Positions from the mixture for given draws: ``uniforms`` (n) pick
+        each one's mode by its weight, ``normals`` (n x 2, standard) place it
+        in that mode's Gaussian. The same draws from one belief to the next
+        (common random numbers) keep what is computed from the samples from
+        jittering between guidance messages."""
+        cumulative = np.cumsum(self.weights / self.weights.sum())
+        modes = np.minimum(np.searchsorted(cumulative, uniforms, side="right"), len(self.weights) - 1)
+        out = np.empty((len(uniforms), 2))
         for j in range(len(self.weights)):
             chosen = modes == j
-            k = int(chosen.sum())
-            if k:
+            if chosen.any():
                 cov = self.covariances[j][POSITION, POSITION]
-                out[chosen] = rng.multivariate_normal(self.means[j][POSITION], cov, size=k, method="cholesky")
+                root = np.linalg.cholesky(cov + 1e-12 * np.eye(2))
+                out[chosen] = self.means[j][POSITION] + normals[chosen] @ root.T
         return out
 
 

@@ -2,28 +2,76 @@
 defender's winning region R_D(x_a), its optimal heading and go (the reported
 state is an attacker win); the defender's shows R_A(x_d) and its heading.
 
-For an agent with robust guidance the fixes are not taken as exact: each
-player is anywhere in the disk its last fix allows (``solvers.ctf_robust``),
-go and "winning" hold against all of it, the region is the opponent's
-region against the worst of it, and ``uncertain`` says that the plain
-answer at the fixes would have said otherwise.
+Each agent's guidance treats the stale, noisy fixes in one of three ways
+(``[guidance] uncertainty``):
+
+- ``none``: the fixes are taken as exact, as in the thesis.
+- ``worst-case``: each player is anywhere in the disk its last fix allows
+  (``solvers.ctf_robust``), go and "winning" hold against all of it, the
+  region is the opponent's region against the worst of it, and
+  ``uncertain`` says that the plain answer at the fixes would have said
+  otherwise.
+- ``calibrated``: the players are where their trackers predict them now
+  (``tracker``), the answers are the plain ones there, and what the
+  prediction gets wrong is paid for as measured. The attacker's go holds
+  when the value plus the calibrated margin for the reports' age is below
+  zero (``calibration``); without a calibration the margin is the
+  tracker's own, the ``1 - alpha`` quantile of the value over its belief,
+  and the note says so. The defender's heading is the one whose step leaves
+  a quantile of the value over samples of the belief best
+  (``solvers.ctf_sampled``), and its value is that quantile.
 """
 
 from __future__ import annotations
 
-import numpy as np
+from dataclasses import dataclass
 
+import numpy as np
+from scipy.stats import norm, qmc
+
+from bearcat.agents.ground_station.calibration import Calibration
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty, nearest_inside
 from bearcat.agents.ground_station.guidance.outlines import on_the_wire, polygon_rings
+from bearcat.agents.ground_station.tracker import Belief
 from bearcat.bus.messages import GameState
 from bearcat.maps import Map
 from bearcat.maps.geodesy import bearing
 from bearcat.solvers.ctf_queries import CtfQueries
 from bearcat.solvers.ctf_robust import RobustCtf
+from bearcat.solvers.ctf_sampled import SampledCtf
 from bearcat.solvers.errors import InputError
 
 RADIUS_STEP = 0.25
 """Metres a set's radius is rounded up to, so an answer is reused while a fix ages by less."""
+SAMPLES_LOG2 = 6
+"""2^6 = 64 joint samples of the belief: the quantiles calibrated guidance
+acts on move by a few centimetres between draws of this size."""
+REGION_SNAP = 0.25
+"""Share of a cell a predicted position is rounded to before its region is
+traced: a prediction moves at every answer, and the outline need not."""
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Where calibrated guidance takes the players to be: the trackers'
+    beliefs at ``t`` and the age of the older of their latest fixes."""
+
+    t: float
+    attacker: Belief
+    defender: Belief
+    age: float
+
+
+def _draws() -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+    """Fixed quasi-random draws, for each player a mode uniform and two
+    standard normals: an unscrambled Sobol' sequence, shifted half a
+    step off zero, the same for every answer (common random numbers)."""
+    points = qmc.Sobol(6, scramble=False).random_base2(SAMPLES_LOG2)
+    points = (points + 0.5 / len(points)) % 1.0
+    return (norm.ppf(points[:, 1:3]), points[:, 0]), (norm.ppf(points[:, 4:6]), points[:, 3])
+
+
+DRAWS = _draws()
 
 
 class CtfAdvisor:
@@ -37,23 +85,35 @@ class CtfAdvisor:
         attacker: str,
         defender: str,
         phase: str = "capture",
-        robust=(),
+        methods: dict[str, str] | None = None,
         uncertainty: Uncertainty | None = None,
+        calibration: Calibration | None = None,
+        alpha: float = 0.01,
+        defender_quantile: float = 0.5,
     ):
         self.map = game_map
         self.attacker, self.defender = attacker, defender
         self.phase = phase
-        self.robust_for = frozenset(robust)
+        self.methods = dict(methods or {})
         rules = solved.solution.rules
         self.uncertainty = uncertainty or Uncertainty({attacker: rules.attacker_speed, defender: rules.defender_speed})
+        self.calibration = calibration
+        self.alpha = alpha
+        self.defender_quantile = defender_quantile
         self.adopt(solved)
+
+    @property
+    def tracking(self) -> bool:
+        """Whether some agent's guidance is calibrated, and so needs the players tracked."""
+        return "calibrated" in self.methods.values()
 
     def adopt(self, solved: CtfQueries) -> None:
         """Answer from ``solved`` from now on: the same game on another grid
         (a ground station that started on provisional sets takes up its own).
         What was kept of the old sets' answers goes with them."""
         self.solved = solved
-        self.robust = RobustCtf(solved) if self.robust_for else None
+        self.robust = RobustCtf(solved) if "worst-case" in self.methods.values() else None
+        self.sampled = SampledCtf(solved) if self.tracking else None
         spacing = min(solved.geometry.grid.spacing)
         # Fixes outside the free space go to its nearest point a whisker inside.
         self._inside = self.map.free_space.buffer(-0.05 * spacing)
@@ -77,8 +137,12 @@ class CtfAdvisor:
         radius = min(self.solved.geometry.grid.spacing)
         for agent in (self.attacker, self.defender):
             self.answer_at(agent, a, d)
-            if agent in self.robust_for:
+            method = self.methods.get(agent, "none")
+            if method == "worst-case":
                 self.answer_at(agent, a, d, (radius, radius))
+            elif method == "calibrated":
+                standing = Estimate(0.0, _standing(a, radius), _standing(d, radius), 0.0)
+                self.calibrated_answer(agent, standing)
 
     def state(self, message: GameState) -> None:
         self.phase = "capture" if message.flag_holder is None else "return"
@@ -91,12 +155,99 @@ class CtfAdvisor:
         latest = fixes.latest
         if self.attacker not in latest or self.defender not in latest:
             return {"game": "ctf", "note": "waiting for both players' fixes"}
+        method = self.methods.get(agent, "none")
+        if method == "calibrated":
+            estimate = self.estimate(fixes, now)
+            if estimate is None:
+                return {"game": "ctf", "note": "waiting for both players' fixes"}
+            return self.calibrated_answer(agent, estimate)
         a, d = latest[self.attacker][0], latest[self.defender][0]
-        radii = self.radii(fixes, now) if agent in self.robust_for else None
+        radii = self.radii(fixes, now) if method == "worst-case" else None
         key = (a[0], a[1], d[0], d[1], self.phase, radii)
         held = self._last.get(agent)
         if held is None or held[0] != key:
             held = self._last[agent] = (key, self.answer_at(agent, a, d, radii))
+        return held[1]
+
+    def estimate(self, fixes: LatestFixes, now: float) -> Estimate | None:
+        """Where the trackers of ``fixes`` believe both players are at
+        ``now``; None until both have a fix."""
+        beliefs = fixes.beliefs(now)
+        if self.attacker not in beliefs or self.defender not in beliefs:
+            return None
+        oldest = min(fixes.latest[self.attacker][1], fixes.latest[self.defender][1])
+        return Estimate(now, beliefs[self.attacker], beliefs[self.defender], now - oldest)
+
+    def estimated_value(self, estimate: Estimate) -> float:
+        """The value calibrated guidance uses: at the players' predicted positions, placed in the free space."""
+        a, d = self.placeable(estimate.attacker.position), self.placeable(estimate.defender.position)
+        return float(self.solved.evaluate(a, d, self.phase).value)
+
+    def calibrated_answer(self, agent: str, estimate: Estimate) -> dict:
+        """The CTF fields of ``agent``'s calibrated guidance (see the module's docstring)."""
+        sampled = self.sampled
+        assert sampled is not None  # made for the agents given calibrated guidance, as this one is
+        try:
+            a = self.placeable(estimate.attacker.position)
+            d = self.placeable(estimate.defender.position)
+            report = self.solved.evaluate(a, d, self.phase)
+        except InputError as exc:
+            return {"game": "ctf", "note": str(exc)[:200]}
+        (za, ua), (zd, ud) = DRAWS
+        attackers, defenders = estimate.attacker.draw(za, ua), estimate.defender.draw(zd, ud)
+        if agent == self.attacker:
+            margin, note = self._margin(estimate.age, float(report.value), attackers, defenders)
+            return {
+                "game": "ctf",
+                "heading": None if report.attacker_heading is None else bearing(*report.attacker_heading),
+                "region": self._region_near("defender", a),
+                "region_of": self.defender,
+                "go": margin is not None and report.value + margin < 0,
+                "value": float(report.value),
+                "margin": None if margin is None else round(margin, 3),
+                "note": note,
+            }
+        answer = sampled.answer(
+            "defender", attackers, defenders, self.defender_quantile, self.phase, (report.defender_heading,)
+        )
+        return {
+            "game": "ctf",
+            "heading": None if answer.heading is None else bearing(*answer.heading),
+            "region": self._region_near("attacker", d),
+            "region_of": self.attacker,
+            "go": None,
+            "value": answer.value,
+        }
+
+    def _margin(self, age: float, value: float, attackers, defenders) -> tuple[float | None, str]:
+        """The margin the attacker's go adds to ``value``, and what the phone is told of it."""
+        if self.calibration is None:
+            sampled = self.sampled
+            assert sampled is not None  # made for calibrated guidance
+            spread = sampled.values(attackers, defenders, self.phase)
+            own = float(np.quantile(spread, 1.0 - self.alpha)) - value
+            return own, "not calibrated yet: the margin is the tracker's own (bearcat calibrate)"
+        margin = self.calibration.margin(self.phase, age)
+        if margin is None:
+            return None, f"no go on reports {age:.1f} s old: the calibration has too few games that old"
+        return margin, ""
+
+    def _region_near(self, mover: str, where: np.ndarray) -> list:
+        """The opponent's region against ``mover`` at ``where``, as sent,
+        traced at ``where`` rounded to ``REGION_SNAP`` of a cell."""
+        snap = REGION_SNAP * min(self.solved.geometry.grid.spacing)
+        near = np.round(where / snap) * snap
+        if not self.solved.geometry.grid.contains(near) or self.solved.blocked_at(near):
+            near = where
+        key = ("near", near[0], near[1], self.phase)
+        held = self._regions.get(mover)
+        if held is None or held[0] != key:
+            if mover == "attacker":
+                values, side = self.solved.defender_region_values(near, self.phase), "defender"
+            else:
+                values, side = self.solved.attacker_region_values(near, self.phase), "attacker"
+            rings = on_the_wire(self.map, polygon_rings(self.solved.polygons(values, side)), self._simplify)
+            held = self._regions[mover] = (key, rings)
         return held[1]
 
     def radii(self, fixes: LatestFixes, now: float) -> tuple[float, float]:
@@ -187,3 +338,20 @@ class CtfAdvisor:
         if self.solved.geometry.grid.contains(p) and not self.solved.blocked_at(p):
             return p
         return nearest_inside(self._inside, p)
+
+
+def _standing(where: np.ndarray, spread: float) -> Belief:
+    """A belief of a player standing at ``where``, ``spread`` metres wide: what a warm-up answers for."""
+    covariance = np.diag([spread**2, spread**2, 0.01, 0.01])
+    return Belief(
+        t=0.0,
+        position=where,
+        velocity=np.zeros(2),
+        covariance=covariance,
+        manoeuvre=0.0,
+        bias=np.zeros(2),
+        bias_covariance=np.eye(2),
+        weights=np.array([1.0]),
+        means=np.concatenate([where, np.zeros(2)])[None],
+        covariances=covariance[None],
+    )

@@ -17,12 +17,13 @@ when one of its side's UAVs detected it; the agent a UAV saw is alerted
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 import numpy as np
 
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.tracker import Trackers
 from bearcat.agents.protocol import Send
 from bearcat.bus import keys
 from bearcat.bus.messages import Detection, Fix, GameState, Guidance, Message
@@ -37,7 +38,8 @@ class GuidanceService:
     faster than its fixes come), and at the scenario's ``rate`` whenever a
     period passed without one (so it also follows the others' moves).
     ``advisor(agent, fixes, now)`` adds the solver's part for an aided agent
-    (None: positions only)."""
+    (None: positions only). ``tracking``, where some guidance is
+    calibrated, makes the trackers each view of the fixes keeps."""
 
     role = "ground-station"
     watches: tuple[str, ...] = ()
@@ -54,6 +56,7 @@ class GuidanceService:
         name: str = keys.GROUND,
         sight=None,
         uncertainty=None,
+        tracking: Callable[[], Trackers] | None = None,
     ) -> None:
         self.game, self.name, self.map = game, name, game_map
         self.agents = tuple(agents)
@@ -66,8 +69,11 @@ class GuidanceService:
         self.subscriptions: tuple[str, ...] = (keys.every(game, "fix"), keys.state(game))
         if sight is not None:
             self.subscriptions += (keys.every(game, "detection"),)
-        self.fixes = LatestFixes(game_map)
-        self.known = {a: LatestFixes(game_map) for a in self.agents} if sight is not None else None
+        def view() -> LatestFixes:
+            return LatestFixes(game_map, None if tracking is None else tracking())
+
+        self.fixes = view()
+        self.known = {a: view() for a in self.agents} if sight is not None else None
         self.spotted: dict[str, tuple[str, float]] = {}  # agent -> (UAV that saw it, when)
         self.seq = 0
         self._last = {a: -np.inf for a in self.agents}
