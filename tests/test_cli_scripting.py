@@ -128,7 +128,9 @@ def test_study_json_is_the_summary(tmp_path):
     rows = json.loads(run.stdout)
     assert rows == json.loads((out / "summary.json").read_text())
     assert {(r["guidance"], r["rate"]) for r in rows} == {
-        (g, rate) for g in ("plain", "robust", "robust, age only") for rate in (1.0, 2.0, 5.0, 10.0)
+        (g, rate)
+        for g in ("plain", "worst-case", "worst-case, age only", "calibrated")
+        for rate in (1.0, 2.0, 5.0, 10.0)
     }
     assert all(r["games"] == 1 and r["netem"] == "ideal" for r in rows)
     assert (out / "holding.png").stat().st_size > 10_000

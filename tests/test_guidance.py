@@ -192,7 +192,9 @@ def test_each_report_carries_the_disk_its_agent_may_be_in():
 def test_robust_advice_is_the_plain_one_for_fresh_exact_fixes_and_cautious_for_stale_ones(ctf10_game):
     ctf10, queries = ctf10_game
     plain = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
-    robust = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return", robust=["a", "d"])
+    robust = CtfAdvisor(
+        ctf10, queries, attacker="a", defender="d", phase="return", methods={"a": "worst-case", "d": "worst-case"}
+    )
     fixes = LatestFixes(ctf10)
     # A state the attacker barely wins: its value just below zero.
     states = [((x, y), (u, v)) for x in np.linspace(1, 9, 9) for y in np.linspace(1, 9, 9) for u, v in [(2.0, 6.0)]]
@@ -217,7 +219,7 @@ def test_a_warmed_up_advisor_answers_every_fix_as_a_fresh_one_does(ctf10_game):
     the very positions it answered, with stale fixes that grow the robust
     disks, and after the phase changes."""
     ctf10, queries = ctf10_game
-    common = dict(attacker="a", defender="d", phase="capture", robust=["a", "d"])
+    common = dict(attacker="a", defender="d", phase="capture", methods={"a": "worst-case", "d": "worst-case"})
     warmed, fresh = CtfAdvisor(ctf10, queries, **common), CtfAdvisor(ctf10, queries, **common)
     a, d = (2.0, 2.0), (6.0, 6.0)
     warmed.warm_up({"a": a, "d": d})

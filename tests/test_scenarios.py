@@ -191,8 +191,11 @@ def test_study_summaries_count_goes_false_goes_and_real_windows():
     assert (row["games"], row["attacker_wins"], row["goes"], row["false_goes"]) == (4, 1, 3, 2)
     assert (row["goes_really_open"], row["really_open_won"], row["median_go_time"]) == (2, 1, 4.0)
     assert row["false_go_rate"] == pytest.approx(2 / 3, abs=1e-3)
-    tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])  # 3 guidance x 2 profiles x 3 seeds
-    assert [t["seed"] for t in tasks] == [10, 11, 12] * 6 and len({t["key"] for t in tasks}) == 18
+    tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])  # 4 guidance x 2 profiles x 3 seeds
+    assert [t["seed"] for t in tasks] == [10, 11, 12] * 8 and len({t["key"] for t in tasks}) == 24
+    calibrated = study_tasks("go-no-go", 3, 10, ["3g"], guidance=["calibrated"])
+    assert [t["labels"]["guidance"] for t in calibrated] == ["calibrated"] * 3
+    assert {t["key"] for t in calibrated} < {t["key"] for t in tasks}
 
 
 def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():
@@ -215,13 +218,13 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
     changed = vary(
         base,
         {
-            "guidance.robust": True,
+            "guidance.uncertainty": "worst-case",
             "agent.*.fix_rate": 5.0,
             "agent.defender.reaction": 1.2,
             "agent.defender.options.standoff": 3.0,
         },
     )
-    assert changed.robust_guidance and not base.robust_guidance
+    assert changed.uncertainty == "worst-case" and base.uncertainty == "none"
     assert [a.fix_rate for a in changed.agents] == [5.0, 5.0]
     assert changed.agent("defender").reaction == 1.2
     assert changed.agent("attacker").reaction == base.agent("attacker").reaction
@@ -229,15 +232,18 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
     assert changed.agent("defender").options.lead == base.agent("defender").options.lead
     # Its TOML is what a peer fetching it gets: it reads back as the same scenario.
     again = parse_scenario(changed.text, game_map=changed.map)
-    assert again.agents == changed.agents and again.robust_guidance
-    assert "with guidance.robust = True" in changed.source
+    assert again.agents == changed.agents and again.uncertainty == "worst-case"
+    assert "with guidance.uncertainty = 'worst-case'" in changed.source
 
 
 @pytest.mark.parametrize(
     "changes, message",
     [
         ({"agent.nobody.reaction": 1.0}, "there is no agent 'nobody'; the ids are attacker, defender"),
-        ({"robust": True}, "names no key"),
+        ({"uncertainty": "none"}, "names no key"),
+        ({"guidance.uncertainty": "cautious"}, "guidance.uncertainty"),
+        ({"guidance.robust": True}, "guidance.robust: was replaced by guidance.uncertainty"),
+        ({"agent.defender.robust": True}, "agent[1].robust: was replaced by agent[1].uncertainty"),
         ({"agent.defender.reaction": -1.0}, "agent[1].reaction"),
         ({"guidance.confidence": 1.0}, "guidance.confidence"),
     ],
@@ -250,13 +256,16 @@ def test_a_bad_change_is_refused_in_one_sentence_naming_the_key(changes, message
     assert "\n" not in str(caught.value)
 
 
-def test_new_scenarios_get_robust_guidance_and_the_thesis_reproductions_keep_it_off(tmp_path):
+def test_new_scenarios_get_their_game_s_best_guidance_and_the_thesis_reproductions_keep_the_thesis_s(tmp_path):
     path = tmp_path / "new.toml"
-    path.write_text(scenario_text().replace("[guidance]\nrobust = false\n", ""))
-    assert "[guidance]" not in path.read_text() and load_scenario(path).robust_guidance is True
+    path.write_text(scenario_text().replace('[guidance]\nuncertainty = "none"\n', ""))
+    assert "[guidance]" not in path.read_text() and load_scenario(path).uncertainty == "calibrated"
     for name in ("fake-out", "fake-out-aided-defender", "go-no-go", "search", "open-loop", "small-area"):
-        assert load_scenario(name).robust_guidance is False, name
+        assert load_scenario(name).uncertainty == "none", name
+    assert load_scenario("pursuit-field").uncertainty == "none"
     from bearcat.scenarios.variants import vary
 
-    one = vary(load_scenario("fake-out"), {"agent.defender.robust": True})
-    assert [one.robust(a) for a in one.agents] == [False, True]
+    one = vary(load_scenario("fake-out"), {"agent.defender.uncertainty": "calibrated"})
+    assert [one.uncertainty_of(a) for a in one.agents] == ["none", "calibrated"]
+    with pytest.raises(ScenarioError, match=re.escape("reach-avoid guidance has no 'calibrated' form")):
+        vary(load_scenario("open-loop"), {"guidance.uncertainty": "calibrated"})

@@ -323,13 +323,13 @@ def test_over_tcp_no_fix_is_lost_but_some_arrive_late_in_bursts(tmp_path):
     assert sum(b - a < 0.002 for a, b in itertools.pairwise(arrivals)) > len(late)  # what waited came with it
 
 
-def test_robust_guidance_sends_each_report_s_disk_and_the_recording_draws_them(tmp_path):
+def test_worst_case_guidance_sends_each_report_s_disk_and_the_recording_draws_them(tmp_path):
     """Each report's radius is at least the distance its agent could walk
     since the fix (3 m/s), the robust answers say when the plain one would
     differ, and the recording has the disks on the phone and beside the truth."""
     from bearcat.cli.main import main
 
-    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, robust=True)
+    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, uncertainty="worst-case")
     assert main(["simulate", str(path), "--seed", "4", "--out", str(tmp_path / "out")]) == 0
     run = tmp_path / "out" / "seed-4"
     guidance = [

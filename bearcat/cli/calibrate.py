@@ -33,9 +33,7 @@ def register(commands: Commands) -> None:
     p.add_argument("scenario", metavar="SCENARIO", help="a built-in capture-the-flag scenario or a scenario TOML file")
     p.add_argument("--netem", metavar="PROFILE", help="network profile (default: the scenario's)")
     p.add_argument("--trials", type=arguments.count, default=200, metavar="N", help="games to fit on (default 200)")
-    p.add_argument(
-        "--holdout", type=arguments.count, default=100, metavar="M", help="games to check on (default 100)"
-    )
+    p.add_argument("--holdout", type=arguments.count, default=100, metavar="M", help="games to check on (default 100)")
     p.add_argument(
         "--seed",
         type=arguments.seed,
@@ -51,7 +49,9 @@ def register(commands: Commands) -> None:
         help="the share of goes allowed to be wrong (default: the scenario's guidance.alpha)",
     )
     arguments.add_batch_options(p, "games")
-    p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./calibrations/SCENARIO-PROFILE)")
+    p.add_argument(
+        "--out", type=Path, metavar="DIR", help="results directory (default ./calibrations/SCENARIO-PROFILE)"
+    )
     p.add_argument(
         "--json",
         action="store_true",
@@ -64,14 +64,16 @@ def run(args) -> int:
     from bearcat.agents.ground_station.calibration import coverage, fit
     from bearcat.agents.ground_station.calibration_store import store_calibration
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import GAMES
+    from bearcat.scenarios.cast import ctf_of
     from bearcat.scenarios.schema import load_scenario
     from bearcat.studies.batch import run_batch
     from bearcat.studies.calibration import calibration_tasks, play_calibration_task, scores_of
 
     scenario = load_scenario(args.scenario)
     if scenario.game != "ctf":
-        raise arguments.UsageError(f"{scenario.source}: calibrated guidance is for capture-the-flag, not {scenario.game}")
+        raise arguments.UsageError(
+            f"{scenario.source}: calibrated guidance is for capture-the-flag, not {scenario.game}"
+        )
     profile = load_profile(args.netem or scenario.netem)
     alpha = scenario.alpha if args.alpha is None else args.alpha
     if not 0.0 < alpha <= 0.5:
@@ -98,7 +100,7 @@ def run(args) -> int:
             )
         fit_scores = [s for t in fitted for s in scores_of(results[t["key"]])]
         check_scores = [s for t in checked for s in scores_of(results[t["key"]])]
-        game = GAMES["ctf"](scenario).own()  # type: ignore[union-attr]
+        game = ctf_of(scenario).own()
         about = {
             "scenario": scenario.name,
             "map": scenario.map.name,
@@ -107,7 +109,7 @@ def run(args) -> int:
             "check_seeds": [args.seed + args.trials, args.seed + args.trials + args.holdout - 1],
         }
         calibration = fit(fit_scores, alpha, about=about)
-        checks = coverage(calibration, check_scores)
+        checks = coverage(calibration, fit_scores, check_scores)
         rows = [_row(c) for c in checks]
         (out / "calibration.json").write_text(json.dumps(calibration.to_json(), indent=1) + "\n")
         (out / "coverage.json").write_text(json.dumps(rows, indent=1) + "\n")
@@ -153,5 +155,7 @@ def _table(rows, alpha: float) -> str:
         share = "-" if r["coverage"] is None else f"{r['coverage']:.1%}"
         interval = "-" if r["interval"] is None else f"{r['interval'][0]:.1%}-{r['interval'][1]:.1%}"
         verdict = r["verdict"] or ("no margin: no go" if r["margin"] is None else "no held-out answers")
-        lines.append(f"{r['phase']:<9}{ages:>14}{margin:>11}{r['scores']:>9}{r['games']:>7}{share:>10}{interval:>18}  {verdict}")
+        lines.append(
+            f"{r['phase']:<9}{ages:>14}{margin:>11}{r['scores']:>9}{r['games']:>7}{share:>10}{interval:>18}  {verdict}"
+        )
     return "\n".join(lines)

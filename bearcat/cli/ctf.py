@@ -26,6 +26,7 @@ from bearcat.cli.progress import solve_bars
 from bearcat.cli.writing import writing
 from bearcat.maps import load_map
 from bearcat.maps.geodesy import bearing
+from bearcat.scenarios.schema import UNCERTAINTIES
 from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
 from bearcat.solvers.ctf_playout import play
 from bearcat.solvers.ctf_queries import CtfQueries, StateReport
@@ -133,11 +134,32 @@ def register(commands: arguments.Commands) -> None:
     )
     q.add_argument("--plot", type=Path, metavar="PNG", help="draw the state and both players' opponent regions")
     robust = q.add_argument_group(
-        "robust answers",
-        "with --robust, each position is a fix: the player is anywhere within its top speed x the fix's age "
-        "plus the fix's error radius at the confidence, and the answers hold against all of it",
+        "answers for stale, noisy fixes",
+        "with --uncertainty worst-case or calibrated, each position is a fix taken some seconds ago. worst-case: "
+        "the player is anywhere within its top speed x the fix's age plus the fix's error radius at the "
+        "confidence, and the answers hold against all of it. calibrated: a tracker given the fix predicts the "
+        "player to now; the attacker's go adds the margin 'bearcat calibrate' stored for the profile, and the "
+        "defender's heading acts on a quantile of the value over the tracker's belief",
     )
-    robust.add_argument("--robust", action="store_true", help="answer for the sets the fixes allow, worst case")
+    robust.add_argument(
+        "--uncertainty",
+        choices=UNCERTAINTIES,
+        default="none",
+        help="none (default): the positions are exact; worst-case or calibrated: see above",
+    )
+    robust.add_argument(
+        "--netem",
+        default="wifi",
+        metavar="PROFILE",
+        help="calibrated: the profile whose GPS model the tracker uses and whose calibration is read (default wifi)",
+    )
+    robust.add_argument(
+        "--alpha",
+        type=float,
+        default=0.01,
+        metavar="A",
+        help="calibrated: the share of goes allowed to be wrong, as calibrated (default 0.01)",
+    )
     for who in ("attacker", "defender"):
         robust.add_argument(
             f"--{who}-age",
@@ -308,6 +330,7 @@ def run_query(args) -> int:
     guidance = CtfQueries(solved.solution)
     phase = args.phase or ("return" if args.stages == "return" else "capture")
     report = guidance.evaluate(args.attacker, args.defender, phase)
+    args.robust = args.uncertainty == "worst-case"
     if args.robust:
         robust = robust_answers(args, game, guidance, phase)
         report = StateReport(report.value, robust["attacker"].heading, robust["defender"].heading)
@@ -345,6 +368,20 @@ def run_query(args) -> int:
                 f"worst case {a.worst:+.3f} m, {verdict if a.wins else 'no ' + verdict}"
                 + (" - uncertain: the plain answer differs" if a.uncertain else "")
             )
+    if args.uncertainty == "calibrated":
+        calibrated = calibrated_answers(args, game, guidance, phase)
+        answer["calibrated"] = calibrated
+        a, d = calibrated["attacker"], calibrated["defender"]
+        margin = "none: no go at this age" if a["margin_m"] is None else f"{a['margin_m']:+.3f} m"
+        out.say(
+            f"calibrated, attacker's display (predicted {calibrated['age_s']:g} s on): value {a['value_m']:+.3f} m, "
+            f"margin {margin}, {'go' if a['go'] else 'no go'}" + (f" ({a['note']})" if a["note"] else "")
+        )
+        heading = "none" if d["heading_deg"] is None else f"{d['heading_deg']:.1f} deg from north"
+        out.say(
+            f"calibrated, defender's display: value {d['value_m']:+.3f} m at the {calibrated['defender_quantile']:g} "
+            f"quantile of its belief, heading {heading}"
+        )
     for who in ("attacker", "defender"):
         h = answer[f"{who}_heading"]
         text = "none (the value is flat here)" if h is None else f"{h['bearing_deg']:.1f} deg from north"
@@ -400,6 +437,57 @@ def robust_answers(args, game: CtfGame, guidance: CtfQueries, phase: str) -> dic
         "defender": robust.answer("defender", attacker, defender, phase),
         "defender_region": robust.region_values("defender", attacker, phase),
         "attacker_region": robust.region_values("attacker", defender, phase),
+    }
+
+
+def calibrated_answers(args, game: CtfGame, guidance: CtfQueries, phase: str) -> dict:
+    """Both displays' calibrated answers for the fixes the options describe:
+    a tracker per player given its fix, predicted to the moment the older is
+    its age old."""
+    from bearcat.agents.ground_station.calibration_store import load_calibration
+    from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor, Estimate
+    from bearcat.agents.ground_station.tracker import Motion, Tracker
+    from bearcat.netem.profiles import load_profile
+
+    if not 0.0 < args.alpha <= 0.5:
+        raise arguments.UsageError(f"--alpha must lie in (0, 0.5], got {args.alpha:g}")
+    profile = load_profile(args.netem)
+    rules = game.rules
+    now = max(args.attacker_age, args.defender_age)
+    beliefs = {}
+    for who, speed in (("attacker", rules.attacker_speed), ("defender", rules.defender_speed)):
+        tracker = Tracker(profile.gps, profile.compass, Motion.of(speed))
+        tracker.observe(now - getattr(args, f"{who}_age"), getattr(args, who), args.accuracy or None)
+        belief = tracker.predict(now)
+        assert belief is not None  # the tracker has its fix
+        beliefs[who] = belief
+    calibration = load_calibration(game, profile, args.alpha)
+    advisor = CtfAdvisor(
+        game.map,
+        guidance,
+        attacker="attacker",
+        defender="defender",
+        phase=phase,
+        methods={"attacker": "calibrated", "defender": "calibrated"},
+        calibration=calibration,
+        alpha=args.alpha,
+    )
+    estimate = Estimate(now, beliefs["attacker"], beliefs["defender"], now)
+    attacker, defender = (advisor.calibrated_answer(side, estimate) for side in ("attacker", "defender"))
+    return {
+        "profile": profile.name,
+        "alpha": args.alpha,
+        "calibrated": calibration is not None,
+        "age_s": now,
+        "defender_quantile": advisor.defender_quantile,
+        "attacker": {
+            "value_m": round(attacker["value"], 4),
+            "margin_m": attacker["margin"],
+            "go": attacker["go"],
+            "heading_deg": attacker["heading"],
+            "note": attacker.get("note", ""),
+        },
+        "defender": {"value_m": round(defender["value"], 4), "heading_deg": defender["heading"]},
     }
 
 

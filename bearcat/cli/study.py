@@ -24,7 +24,7 @@ from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import make_directory, writing
 from bearcat.scenarios.schema import TRANSPORTS
-from bearcat.studies.thesis import STUDIES
+from bearcat.studies.thesis import GUIDANCE, STUDIES
 
 
 def register(commands: Commands) -> None:
@@ -41,6 +41,13 @@ def register(commands: Commands) -> None:
         nargs="+",
         choices=TRANSPORTS,
         help="transports to compare (default: each scenario's own): tcp, udp or both",
+    )
+    p.add_argument(
+        "--guidance",
+        nargs="+",
+        choices=tuple(GUIDANCE),
+        metavar="NAME",
+        help=f"play only the cells of this guidance: {', '.join(map(repr, GUIDANCE))} (default: every one)",
     )
     arguments.add_batch_options(p, "games")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
@@ -85,7 +92,9 @@ def run(args) -> int:
             play_human_trials(out, args.human, args.trials, args.seed, say=report.say)
             results = read_results(out / "results.jsonl")  # the models' games beside the person's
         else:
-            tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport)
+            tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport, args.guidance)
+            for line in uncalibrated(tasks):
+                report.say(line)
             with counting(len(tasks), args.study, "game") as finished:
                 results = run_batch(
                     tasks,
@@ -120,6 +129,27 @@ def _presolve(study) -> None:
     for name in dict.fromkeys(cell.scenario for cell in study.cells):
         scenario = load_scenario(name)
         presolve(scenario, scenario.netem)
+
+
+def uncalibrated(tasks) -> list[str]:
+    """A line for each scenario and profile whose calibrated games will have
+    no calibration to answer from, naming the command that makes one."""
+    from bearcat.agents.ground_station.calibration_store import load_calibration
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import ctf_of
+    from bearcat.scenarios.schema import load_scenario
+
+    lines = []
+    wanted = {(t["scenario"], t["netem"]) for t in tasks if "calibrated" in (t.get("changes") or {}).values()}
+    for name, netem in sorted(wanted, key=str):
+        scenario = load_scenario(name)
+        profile = load_profile(netem or scenario.netem)
+        if load_calibration(ctf_of(scenario).own(), profile, scenario.alpha) is None:
+            lines.append(
+                f"no calibration of {name} on {profile.name}: its calibrated games take the tracker's own margin "
+                f"(bearcat calibrate {name} --netem {profile.name} makes one)"
+            )
+    return lines
 
 
 def summary_rows(study: str, results) -> list[dict]:

@@ -11,7 +11,13 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-GUIDANCE_COLOURS = {"plain": "tab:red", "robust": "tab:blue", "robust, age only": "tab:green", "human": "tab:purple"}
+GUIDANCE_COLOURS = {
+    "plain": "tab:red",
+    "worst-case": "tab:blue",
+    "worst-case, age only": "tab:green",
+    "calibrated": "tab:orange",
+    "human": "tab:purple",
+}
 
 
 def _errors(rows, rate: str, interval: str) -> tuple[np.ndarray, np.ndarray]:
@@ -86,7 +92,7 @@ def go_no_go_figure(rows):
 def fake_out_figure(rows):
     """One heatmap per report rate: the attacker's win rate against the
     unaided defender by marking distance (rows) and reaction time (columns),
-    the robust aided defender as the bottom row."""
+    the worst-case aided defender as the bottom row."""
     people = [r for r in rows if r["defender"] == "human"]
     rows = [r for r in rows if r["defender"] != "human"]
     rates = sorted({r["rate"] for r in rows}) or [None]
@@ -114,7 +120,7 @@ def fake_out_figure(rows):
         ax.set_title(f"phones report at {rate:g} Hz")
     if image is not None:
         fig.colorbar(image, ax=axes[0].tolist(), label="attacker wins (%)")
-    title = "the fake-out: attacker wins against the unaided defender, and the robust aided one"
+    title = "the fake-out: attacker wins against the unaided defender, and the worst-case aided one"
     for r in people:
         low, high = (100 * v for v in r["attacker_win_interval"])
         title += (

@@ -18,6 +18,8 @@ from typing import TypeVar
 import numpy as np
 import shapely
 
+from bearcat.agents.ground_station.calibration import Calibration
+from bearcat.agents.ground_station.calibration_store import load_calibration
 from bearcat.agents.ground_station.ctf_cache import (
     CtfGame,
     default_rules,
@@ -33,12 +35,10 @@ from bearcat.agents.ground_station.guidance import (
     ReachAvoidAdvisor,
     SearchAdvisor,
 )
-from bearcat.agents.ground_station.calibration import Calibration
-from bearcat.agents.ground_station.calibration_store import load_calibration
 from bearcat.agents.ground_station.guidance.fixes import Uncertainty
-from bearcat.agents.ground_station.tracker import Motion, Trackers
 from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.agents.ground_station.sight import Sight
+from bearcat.agents.ground_station.tracker import Motion, Trackers
 from bearcat.agents.ground_station.uav_tasking import Uav, UavTasker
 from bearcat.agents.human import behaviours
 from bearcat.agents.human.agent import HumanAgent
@@ -174,6 +174,13 @@ def build_cast(
     starts = {a.id: a.start for a in scenario.agents}
     warm_up = functools.partial(guidance.warm_up, starts)
     return Cast(crowd, referee, guidance, tasking, fleet, game.awaited, adopt, warm_up)
+
+
+def ctf_of(scenario: Scenario) -> _CtfGame:
+    """The capture-the-flag game of ``scenario`` as its ground station sets it up."""
+    if scenario.game != "ctf":
+        raise ScenarioError(f"{scenario.source}: this needs a capture-the-flag game, not {scenario.game}")
+    return _CtfGame(scenario)
 
 
 def simulated_autopilot(scenario: Scenario, spec, seed: int) -> SimulatedAutopilot:

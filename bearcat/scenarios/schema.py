@@ -462,7 +462,7 @@ def _check_uncertainty(file: ScenarioFile) -> None:
 
 def _check_renamed(data: dict) -> None:
     """A key an older bearcat read, named with what replaced it."""
-    replaced = "was replaced by {}uncertainty: \"worst-case\" for true, \"none\" for false"
+    replaced = 'was replaced by {}uncertainty: "worst-case" for true, "none" for false'
     guidance = data.get("guidance")
     if isinstance(guidance, dict) and "robust" in guidance:
         raise Invalid("guidance.robust", replaced.format("guidance."))

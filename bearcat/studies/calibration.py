@@ -24,9 +24,10 @@ import numpy as np
 from bearcat.agents.ground_station.calibration import Score
 from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.bus import keys
 from bearcat.bus.messages import Fix
 from bearcat.netem.profiles import Profile
-from bearcat.scenarios.cast import tracking
+from bearcat.scenarios.cast import ctf_of, tracking
 from bearcat.scenarios.schema import Scenario
 from bearcat.solvers.ctf_queries import CtfQueries
 from bearcat.solvers.errors import InputError
@@ -50,7 +51,6 @@ def play_calibration_task(task: dict) -> dict:
 
     from bearcat.netem.profiles import load_profile
     from bearcat.runtime.simulate import simulate
-    from bearcat.scenarios.cast import GAMES
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.variants import vary
 
@@ -61,8 +61,7 @@ def play_calibration_task(task: dict) -> dict:
         outcome = simulate(scenario, seed=task["seed"], netem=task["netem"], events=events)
         from bearcat.agents.ground_station.event_log import read_events
 
-        queries = GAMES["ctf"](scenario).solved()
-        assert isinstance(queries, CtfQueries)
+        queries = ctf_of(scenario).solved()
         scores = replay_scores(scenario, profile, queries, read_events(events), task["seed"])
     return {
         "key": task["key"],
@@ -102,7 +101,7 @@ def replay_scores(scenario: Scenario, profile: Profile, queries: CtfQueries, eve
                 score = _score(advisor, fixes, truth, event["t"], attacker, defender, game)
                 if score is not None:
                     scores.append(score)
-        elif kind == "received" and event.get("receiver") == "gs":
+        elif kind == "received" and event.get("receiver") == keys.GROUND:
             key = event["key"]
             if "/fix/" in key and (event["sender"], event["seq"]) in sent_fixes:
                 fields = sent_fixes[(event["sender"], event["seq"])]

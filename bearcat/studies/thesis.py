@@ -4,12 +4,13 @@
   defender-winning position, feints until its display shows a window. The
   unaided defender's outcome is mapped over the human factors that decide
   it: how far in front of the attacker it marks, how late it reacts, how
-  often the phones report; the robust aided defender is the reference row.
+  often the phones report; the worst-case aided defender is the reference row.
 - ``holding``: the aided defender from the fake-out starts, its guidance
-  plain or robust (``guidance.robust``), per network profile and report rate.
+  plain, worst-case or calibrated (``guidance.uncertainty``), per network
+  profile and report rate.
 - ``go-no-go`` (3.5.2): an attacker waiting by cover commits when its
   display says go; a go the game then loses is a false go. Plain against
-  robust guidance, per network profile.
+  worst-case and calibrated guidance, per network profile.
 - ``search`` (6.2.4): the UAV looks for the defender the attacker cannot see,
   guided by reachability, sweeping like a lawnmower, or going to the nearest
   place the defender may be; how soon it is found, how often the attacker wins.
@@ -30,13 +31,16 @@ from dataclasses import dataclass, field
 PROFILES = ("ideal", "wifi", "3g", "3g-degraded")
 
 GUIDANCE = {
-    "plain": {"robust": False, "confidence": 0.95},
-    "robust": {"robust": True, "confidence": 0.95},
-    "robust, age only": {"robust": True, "confidence": 0.0},
+    "plain": {"uncertainty": "none", "confidence": 0.95},
+    "worst-case": {"uncertainty": "worst-case", "confidence": 0.95},
+    "worst-case, age only": {"uncertainty": "worst-case", "confidence": 0.0},
+    "calibrated": {"uncertainty": "calibrated", "confidence": 0.95},
 }
-"""The guidance a study compares: answers at the reports as they are;
-robust against where the players may be, GPS error included (its 95 %
-circle); and robust against how far they may have moved only."""
+"""The guidance a study compares: answers at the reports as they are; the
+worst case over where the players may be, GPS error included (its 95 %
+circle), or over how far they may have moved only; and answers at where
+the trackers predict them, with the calibrated margin (``bearcat calibrate``
+on the same scenario and profile, else the tracker's own)."""
 
 MARKING = (3.0, 6.0, 9.0, 12.0)
 """The unaided defender's marking distance (m in front of the attacker on its run home)."""
@@ -71,8 +75,8 @@ class Study:
 def _guidance(name: str, who: str | None) -> dict:
     """The changes that give ``who`` (None: everybody) guidance ``name``."""
     spec = GUIDANCE[name]
-    robust = "guidance.robust" if who is None else f"agent.{who}.robust"
-    return {robust: spec["robust"], "guidance.confidence": spec["confidence"]}
+    method = "guidance.uncertainty" if who is None else f"agent.{who}.uncertainty"
+    return {method: spec["uncertainty"], "guidance.confidence": spec["confidence"]}
 
 
 def _fake_out_cells() -> tuple[Cell, ...]:
@@ -87,8 +91,11 @@ def _fake_out_cells() -> tuple[Cell, ...]:
                 }
                 labels = {"defender": "unaided", "marking": marking, "reaction": reaction, "rate": rate}
                 cells.append(Cell("fake-out", changes, labels))
-            changes = _guidance("robust", "defender") | {"agent.defender.reaction": reaction, "agent.*.fix_rate": rate}
-            labels = {"defender": "robust aided", "marking": None, "reaction": reaction, "rate": rate}
+            changes = _guidance("worst-case", "defender") | {
+                "agent.defender.reaction": reaction,
+                "agent.*.fix_rate": rate,
+            }
+            labels = {"defender": "worst-case aided", "marking": None, "reaction": reaction, "rate": rate}
             cells.append(Cell("fake-out-aided-defender", changes, labels))
     return tuple(cells)
 
@@ -99,7 +106,7 @@ STUDIES = {
         (None,),
         ("defender", "marking", "reaction", "rate"),
         "the fake-out's outcome against the unaided defender over its marking distance, its reaction time and "
-        "the phones' report rate, with the robust aided defender as the reference (3.5.1)",
+        "the phones' report rate, with the worst-case aided defender as the reference (3.5.1)",
     ),
     "holding": Study(
         tuple(
@@ -113,15 +120,15 @@ STUDIES = {
         ),
         PROFILES,
         ("guidance", "rate"),
-        "how often the aided defender holds from the fake-out's starts, plain against robust guidance, "
-        "per network profile and report rate",
+        "how often the aided defender holds from the fake-out's starts, plain, worst-case and calibrated "
+        "guidance, per network profile and report rate",
     ),
     "go-no-go": Study(
         tuple(Cell("go-no-go", _guidance(g, None), {"guidance": g}) for g in GUIDANCE),
         PROFILES,
         ("guidance",),
         "how often an attacker's go, decided on what the network delivered, is false, per network profile, "
-        "plain against robust guidance (3.5.2)",
+        "plain, worst-case and calibrated guidance (3.5.2)",
     ),
     "search": Study(
         tuple(Cell("search", {"uav.*.search": s}, {"search": s}) for s in ("reachability", "lawnmower", "nearest")),
@@ -133,11 +140,21 @@ STUDIES = {
 }
 
 
-def study_tasks(study: str, trials: int, seed: int, profiles=None, transports=None) -> list[dict]:
-    """The games of ``study``: per cell, profile, transport (None: the scenario's), ``trials`` seeds."""
+def study_cells(study: str, guidance=None) -> tuple[Cell, ...]:
+    """The cells of ``study``; with ``guidance`` (names of ``GUIDANCE``), only
+    those of that guidance (and those that vary no guidance)."""
+    cells = STUDIES[study].cells
+    if guidance is None:
+        return cells
+    return tuple(c for c in cells if c.labels.get("guidance", guidance[0]) in guidance)
+
+
+def study_tasks(study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None) -> list[dict]:
+    """The games of ``study``: per cell (of ``guidance``, if given), profile,
+    transport (None: the scenario's), ``trials`` seeds."""
     spec = STUDIES[study]
     tasks = []
-    for cell in spec.cells:
+    for cell in study_cells(study, guidance):
         for profile in profiles or spec.profiles:
             for transport in transports or (None,):
                 for s in range(seed, seed + trials):

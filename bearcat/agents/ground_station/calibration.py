@@ -143,12 +143,14 @@ def fit(scores: Sequence[Score], alpha: float, edges=AGE_EDGES, about: dict | No
 @dataclass(frozen=True)
 class Coverage:
     """How often held-out scores of one bin lay within the margin:
-    ``covered`` of ``scores`` from ``games`` games, the share and its 95 %
-    interval from resampling whole games; ``verdict``: ``"holds"`` where
-    that interval holds the promised ``1 - alpha``, ``"conservative"`` where
-    it lies above (the margin is wider than it need be), ``"short"`` where
-    it lies below (goes are wrong more often than promised), None where the
-    bin had no margin or no scores."""
+    ``covered`` of ``scores`` from ``games`` games, and the share; its 95 %
+    interval comes from resampling whole games, those the margin was fitted
+    on (the margin is fitted again each time) and the held-out ones, so it
+    holds what a calibration of this many games delivers. ``verdict``:
+    ``"holds"`` where that interval holds the promised ``1 - alpha``,
+    ``"conservative"`` where it lies above (the margin is wider than it need
+    be), ``"short"`` where it lies below (goes are wrong more often than
+    promised), None where the bin had no margin or no scores."""
 
     phase: str
     ages: tuple[float, float]
@@ -162,33 +164,51 @@ class Coverage:
 
 
 def coverage(
-    calibration: Calibration, scores: Sequence[Score], *, resamples: int = 2000, seed: int = 0
+    calibration: Calibration,
+    fitted: Sequence[Score],
+    scores: Sequence[Score],
+    *,
+    resamples: int = 1000,
+    seed: int = 0,
 ) -> list[Coverage]:
-    """Per phase and bin of ``calibration``, its coverage on ``scores``,
-    which it must not have seen."""
+    """Per phase and bin of ``calibration`` (made from the scores ``fitted``),
+    its coverage on ``scores``, which it must not have seen."""
     rng = np.random.default_rng(seed)
     out = []
     edges = calibration.edges
+    target = 1.0 - calibration.alpha
     for phase, margins in calibration.margins.items():
         for k, margin in enumerate(margins):
-            ours = [s for s in scores if s.phase == phase and calibration.bin(s.age) == k]
-            games = sorted({s.game for s in ours})
             ages = (edges[k], edges[k + 1])
-            if margin is None or not ours:
-                out.append(Coverage(phase, ages, margin, len(ours), len(games), 0, None, None, None))
+            held = _by_game(s for s in scores if s.phase == phase and calibration.bin(s.age) == k)
+            n = sum(len(e) for e in held)
+            if margin is None or not held:
+                out.append(Coverage(phase, ages, margin, n, len(held), 0, None, None, None))
                 continue
-            index = {g: j for j, g in enumerate(games)}
-            hits = np.zeros(len(games))
-            totals = np.zeros(len(games))
-            for s in ours:
-                totals[index[s.game]] += 1
-                hits[index[s.game]] += s.error <= margin
-            draws = rng.integers(0, len(games), size=(resamples, len(games)))
-            shares = hits[draws].sum(axis=1) / totals[draws].sum(axis=1)
+            fit_games = _by_game(s for s in fitted if s.phase == phase and calibration.bin(s.age) == k)
+            covered = sum(int((e <= margin).sum()) for e in held)
+            shares = []
+            for _ in range(resamples):
+                refit = conformal_quantile(
+                    np.concatenate([fit_games[i] for i in _draw(rng, len(fit_games))]), calibration.alpha
+                )
+                if refit is None:
+                    continue
+                drawn = [held[i] for i in _draw(rng, len(held))]
+                shares.append(sum(int((e <= refit).sum()) for e in drawn) / sum(len(e) for e in drawn))
             low, high = (float(x) for x in np.quantile(shares, [0.025, 0.975]))
-            target = 1.0 - calibration.alpha
-            share = float(hits.sum() / totals.sum())
             verdict = "short" if high < target else "conservative" if low > target else "holds"
-            covered = int(hits.sum())
-            out.append(Coverage(phase, ages, margin, len(ours), len(games), covered, share, (low, high), verdict))
+            out.append(Coverage(phase, ages, margin, n, len(held), covered, covered / n, (low, high), verdict))
     return out
+
+
+def _by_game(scores) -> list[np.ndarray]:
+    """The errors of ``scores``, one array per game."""
+    games: dict[int, list[float]] = {}
+    for s in scores:
+        games.setdefault(s.game, []).append(s.error)
+    return [np.array(e) for e in games.values()]
+
+
+def _draw(rng: np.random.Generator, n: int) -> np.ndarray:
+    return rng.integers(0, n, size=n)

@@ -39,7 +39,7 @@ class SearchAdvisor:
         if agent in self.side:
             fields["possible"] = self._possible()
             if self.ctf.attacker in fixes.latest:
-                robust = agent in self.ctf.robust_for
+                robust = self.ctf.methods.get(agent) == "worst-case"
                 # The worst of P_D is looked for again when the attacker's set grows by half a cell.
                 radius = self.ctf.coarse(self.ctf.radius(self.ctf.attacker, fixes, now)) if robust else None
                 fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0], radius))

@@ -69,6 +69,7 @@ class GuidanceService:
         self.subscriptions: tuple[str, ...] = (keys.every(game, "fix"), keys.state(game))
         if sight is not None:
             self.subscriptions += (keys.every(game, "detection"),)
+
         def view() -> LatestFixes:
             return LatestFixes(game_map, None if tracking is None else tracking())
 
