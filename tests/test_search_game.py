@@ -135,10 +135,11 @@ def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario
     the defender loses, no go once P_D also holds a place where it wins."""
     from bearcat.agents.ground_station.guidance.fixes import LatestFixes
     from bearcat.bus.messages import Fix
+    from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import _CtfGame
 
     game = _CtfGame(scenario)
-    advisor = game.guidance().advisor
+    advisor = game.guidance(load_profile(scenario.netem)).advisor
     tasker = game.tasker()
     solved = game.solved()
     attacker = np.array([125.0, 150.0])  # north of the hall, 35 m short of home
