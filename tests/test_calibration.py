@@ -148,17 +148,19 @@ def test_a_calibrated_game_sends_predictions_and_margins_and_its_replay_reproduc
     that belief's ellipse; the attacker's go is its value plus the margin
     below zero; and replaying the event log through the scores' path gives,
     guidance by guidance, the value the ground station used."""
+    from bearcat.cli.main import main
     from bearcat.netem.profiles import load_profile
-    from bearcat.runtime.simulate import simulate
     from bearcat.scenarios.cast import ctf_of
     from bearcat.scenarios.schema import load_scenario
     from bearcat.studies.calibration import replay_scores
 
     path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, uncertainty="calibrated")
     scenario = load_scenario(path)
-    events = tmp_path / "events.jsonl"
-    simulate(scenario, seed=2, events=events)
-    log = list(read_events(events))
+    assert main(["simulate", str(path), "--seed", "2", "--out", str(tmp_path / "out")]) == 0
+    run = tmp_path / "out" / "seed-2"
+    recording = (run / "recording.rrd").read_bytes()
+    assert b"ground/prediction/attacker" in recording and b"phone/defender/predicted" in recording
+    log = list(read_events(run / "events.jsonl"))
     sent = [e for e in log if e["event"] == "sent" and e["message"].get("type") == "guidance"]
     answered = [e["message"] for e in sent if e["message"]["value"] is not None]
     attacker = [m for m in answered if m["agent"] == "attacker"]

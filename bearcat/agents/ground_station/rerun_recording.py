@@ -6,10 +6,13 @@ saw and what each phone showed, on one time line.
 - ``ground/fix/AGENT``: each agent as its fixes reported it, beside the truth;
 - ``ground/uncertainty/AGENT``: the disk the guidance put round each
   agent's last report (where it may be by then), over the truth;
+- ``ground/prediction/AGENT``: with calibrated guidance, the 95 % ellipse
+  of where the tracker believed each agent was, over the truth;
 - ``ground/uav/UAV``: each UAV's search target and its detections;
 - ``phone/AGENT/...``: that phone's screen as of the guidance it had
   received: the opponent's winning region, the heading ring's arrow, the
-  agents as last reported with their disks and the reports' ages, where an
+  agents as last reported with their disks and the reports' ages (and,
+  with calibrated guidance, the trackers' ellipses), where an
   unseen opponent may be (P_D), an alert when a UAV saw this agent, and a
   note when the advice is uncertain (the robust and the plain answers differ);
 - ``game``: the referee's states as a text log, and the solver's value
@@ -318,6 +321,14 @@ def _log_screen(rec, rr, m, to_local, markers: _Markers) -> None:
             rec.log(f"{base}/disks", rr.LineStrips2D(disks, colors=colours, labels=ages))
             for (r, _), ring, colour in zip(others, disks, colours):
                 rec.log(f"ground/uncertainty/{r['agent']}", rr.LineStrips2D([ring], colors=[colour]))
+        predicted = [r for r in reports if r.get("predicted") and r.get("ellipse")]
+        if predicted:
+            ellipses = [_ellipse(to_local(r["predicted"][1], r["predicted"][0]), *r["ellipse"]) for r in predicted]
+            colours = [_paler(markers.colour(r["agent"])) for r in predicted]
+            labels = [f"{r['agent']} now" for r in predicted]
+            rec.log(f"{base}/predicted", rr.LineStrips2D(ellipses, colors=colours, labels=labels))
+            for r, ring, colour in zip(predicted, ellipses, colours):
+                rec.log(f"ground/prediction/{r['agent']}", rr.LineStrips2D([ring], colors=[colour]))
         me = next((p for p, r in zip(points, reports) if r["agent"] == agent), None)
         if me is not None and m.get("heading") is not None:
             b = np.radians(m["heading"])
@@ -331,6 +342,15 @@ def _disk(centre, radius: float, sides: int = 48) -> np.ndarray:
     """A circle as a closed line of ``sides`` segments."""
     angles = np.linspace(0.0, 2 * np.pi, sides + 1)
     return np.asarray(centre) + radius * np.stack([np.cos(angles), np.sin(angles)], axis=1)
+
+
+def _ellipse(centre, major: float, minor: float, bearing: float, sides: int = 48) -> np.ndarray:
+    """An ellipse as a closed line: semi-axes in metres, the major axis's
+    bearing in degrees clockwise from north."""
+    b = np.radians(bearing)
+    along, across = np.array([np.sin(b), np.cos(b)]), np.array([np.cos(b), -np.sin(b)])
+    angles = np.linspace(0.0, 2 * np.pi, sides + 1)[:, None]
+    return np.asarray(centre) + major * np.cos(angles) * along + minor * np.sin(angles) * across
 
 
 def _state_line(state: dict) -> str:
