@@ -26,7 +26,7 @@ from bearcat.netem.kernel.commands import die_with_parent
 
 pytestmark = pytest.mark.xdist_group("cluster")  # one cluster for the module, in one xdist worker
 
-STUDY = ("study", "go-no-go", "--trials", "2", "--netem", "wifi")  # 3 kinds of guidance x 2 seeds: 6 games
+STUDY = ("study", "go-no-go", "--trials", "3", "--netem", "wifi", "--guidance", "plain", "worst-case")  # 2 x 3: 6 games
 EXPERIMENT = ("experiment", "pursuit", "--domain", "square-10", "--pursuers", "2", "--trials", "6", "--seed", "4")
 
 
