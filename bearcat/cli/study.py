@@ -23,7 +23,7 @@ from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import make_directory, writing
-from bearcat.scenarios.schema import TRANSPORTS
+from bearcat.scenarios.schema import TRANSPORTS, Scenario
 from bearcat.studies.thesis import GUIDANCE, STUDIES
 
 
@@ -132,21 +132,26 @@ def _presolve(study) -> None:
 
 
 def uncalibrated(tasks) -> list[str]:
-    """A line for each scenario and profile whose calibrated games will have
-    no calibration to answer from, naming the command that makes one."""
+    """A line for each scenario and profile whose calibrated attackers will
+    have no calibration to answer from, naming the command that makes one."""
     from bearcat.agents.ground_station.calibration_store import load_calibration
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import ctf_of
     from bearcat.scenarios.schema import load_scenario
+    from bearcat.scenarios.variants import vary
 
+    cells = {(t["scenario"], t["netem"], json.dumps(t.get("changes") or {}, sort_keys=True)) for t in tasks}
+    wanted: dict[tuple[str, str | None], Scenario] = {}
+    for name, netem, changes in sorted(cells, key=str):
+        scenario = vary(load_scenario(name), json.loads(changes))
+        if scenario.game == "ctf" and scenario.uncertainty_of(scenario.team("attacker")[0]) == "calibrated":
+            wanted.setdefault((name, netem), scenario)
     lines = []
-    wanted = {(t["scenario"], t["netem"]) for t in tasks if "calibrated" in (t.get("changes") or {}).values()}
-    for name, netem in sorted(wanted, key=str):
-        scenario = load_scenario(name)
+    for (name, netem), scenario in wanted.items():
         profile = load_profile(netem or scenario.netem)
         if load_calibration(ctf_of(scenario).own(), profile, scenario.alpha) is None:
             lines.append(
-                f"no calibration of {name} on {profile.name}: its calibrated games take the tracker's own margin "
+                f"no calibration of {name} on {profile.name}: its calibrated attackers take the tracker's own margin "
                 f"(bearcat calibrate {name} --netem {profile.name} makes one)"
             )
     return lines

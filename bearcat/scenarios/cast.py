@@ -53,6 +53,8 @@ from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Sc
 from bearcat.solvers.ctf_queries import CtfQueries
 
 log = logging.getLogger(__name__)
+_UNCALIBRATED: set[tuple[str, str, float]] = set()
+"""The scenarios, profiles and alphas this process has said it has no calibration of."""
 
 STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
 _Rules = TypeVar("_Rules", CtfRules, ReachAvoidRules, PursuitRules)
@@ -304,7 +306,7 @@ class _CtfGame:
             phase=self.phase,
             methods=methods,
             uncertainty=_uncertainty(s),
-            calibration=self.calibration(profile) if calibrated else None,
+            calibration=self.calibration(profile) if methods[self.attacker.id] == "calibrated" else None,
             alpha=s.alpha,
             defender_quantile=s.defender_quantile,
         )
@@ -315,10 +317,14 @@ class _CtfGame:
         return _service(s, advisor, sight=sight, tracking=tracking(s, profile) if calibrated else None)
 
     def calibration(self, profile: Profile) -> Calibration | None:
-        """The game's calibration on ``profile``, if ``bearcat calibrate`` made one; if not, the log says so."""
+        """The game's calibration on ``profile``, if ``bearcat calibrate`` made
+        one; if not, the log says so, once per process (a study's worker plays
+        many games of one scenario)."""
         s = self.scenario
         found = load_calibration(self.own(), profile, s.alpha)
-        if found is None:
+        missing = (s.name, profile.name, s.alpha)
+        if found is None and missing not in _UNCALIBRATED:
+            _UNCALIBRATED.add(missing)
             log.warning(
                 "%s: no calibration of map %s on profile %s at alpha %g yet: calibrated guidance takes its margin "
                 "from the tracker's belief until 'bearcat calibrate %s --netem %s' has run",
