@@ -31,31 +31,50 @@ class Navigator:
         self.raster = rasterize(game_map, spacing or max(xmax - xmin, ymax - ymin) / 200)
         self.area = game_map.free_space
         self.grid = self.raster.grid
+        # Steps of half a spacing enough to walk LOOK_AHEAD twice over: the
+        # path is traced that far, and all the way only where that falls short.
+        self._ahead = int(math.ceil(4 * LOOK_AHEAD / min(self.grid.spacing))) + 8
         self._fields: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+        self._goals: dict[object, tuple[object, tuple[np.ndarray, np.ndarray]]] = {}
 
     def toward(self, goal, position) -> np.ndarray | None:
         """Unit (east, north) direction from ``position`` along the shortest path
-        into ``goal`` (a shapely geometry); None once inside it or if it cannot
-        be reached."""
-        goal_geometry = goal if not isinstance(goal, tuple | list | np.ndarray) else shapely.Point(goal)
+        into ``goal`` (a shapely geometry, or a point); None once inside it or
+        if it cannot be reached."""
+        goal_geometry, (phi, seeds) = self._goal(goal)
         p = np.asarray(position, float)
-        if goal_geometry.covers(shapely.Point(p)):
+        if shapely.intersects_xy(goal_geometry, p[0], p[1]):  # a point intersects what covers it
             return None
-        phi, seeds = self._field(goal_geometry)
         p = np.clip(p, self.grid.lo, self.grid.hi)
         i, j = self.grid.nearest_index(p)
         if not math.isfinite(phi[i, j]):
             return None
         try:
-            path = descend(self.grid, phi, p, seeds=seeds).points
+            descent = descend(self.grid, phi, p, seeds=seeds, steps=self._ahead)
+            path, along = descent.points, _lengths(descent.points)
+            if along[-1] < LOOK_AHEAD and len(path) == self._ahead + 1:  # cut short of the look-ahead
+                path = descend(self.grid, phi, p, seeds=seeds).points
+                along = _lengths(path)
         except ValueError:
             return None
-        along = np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])
         k = int(np.searchsorted(along, LOOK_AHEAD))
         aim = path[min(k, len(path) - 1)] if len(path) > 1 else np.asarray(goal_geometry.centroid.coords[0])
         d = aim - p
         n = math.hypot(d[0], d[1])
         return d / n if n > 1e-9 else None
+
+    def _goal(self, goal) -> tuple[object, tuple[np.ndarray, np.ndarray]]:
+        """``goal`` as a prepared geometry, with its field. A walker asks ten
+        times a second for the same goal: a point by its coordinates, a
+        geometry by identity (it is held here, so its id stays its own)."""
+        point = isinstance(goal, tuple | list | np.ndarray)
+        handle = tuple(float(v) for v in goal) if point else id(goal)
+        found = self._goals.get(handle)
+        if found is None:
+            geometry = shapely.Point(handle) if point else goal
+            shapely.prepare(geometry)
+            found = self._goals[handle] = (geometry, self._field(geometry))
+        return found
 
     def _field(self, goal) -> tuple[np.ndarray, np.ndarray]:
         key = shapely.to_wkb(goal)
@@ -71,3 +90,8 @@ class Navigator:
             found = (phi, seeds)
             self._fields[key] = found
         return found
+
+
+def _lengths(path: np.ndarray) -> np.ndarray:
+    """The distance along ``path`` to each of its points."""
+    return np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])
