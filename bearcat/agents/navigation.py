@@ -13,6 +13,7 @@ import math
 
 import numpy as np
 import shapely
+from shapely.geometry.base import BaseGeometry
 
 from bearcat.maps import Map, rasterize
 from bearcat.maps.raster import covered
@@ -35,7 +36,7 @@ class Navigator:
         # path is traced that far, and all the way only where that falls short.
         self._ahead = int(math.ceil(4 * LOOK_AHEAD / min(self.grid.spacing))) + 8
         self._fields: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
-        self._goals: dict[object, tuple[object, tuple[np.ndarray, np.ndarray]]] = {}
+        self._goals: dict[tuple[float, ...] | int, tuple[BaseGeometry, tuple[np.ndarray, np.ndarray]]] = {}
 
     def toward(self, goal, position) -> np.ndarray | None:
         """Unit (east, north) direction from ``position`` along the shortest path
@@ -63,15 +64,15 @@ class Navigator:
         n = math.hypot(d[0], d[1])
         return d / n if n > 1e-9 else None
 
-    def _goal(self, goal) -> tuple[object, tuple[np.ndarray, np.ndarray]]:
+    def _goal(self, goal) -> tuple[BaseGeometry, tuple[np.ndarray, np.ndarray]]:
         """``goal`` as a prepared geometry, with its field. A walker asks ten
         times a second for the same goal: a point by its coordinates, a
         geometry by identity (it is held here, so its id stays its own)."""
-        point = isinstance(goal, tuple | list | np.ndarray)
-        handle = tuple(float(v) for v in goal) if point else id(goal)
+        point = tuple(float(v) for v in goal) if isinstance(goal, tuple | list | np.ndarray) else None
+        handle = id(goal) if point is None else point
         found = self._goals.get(handle)
         if found is None:
-            geometry = shapely.Point(handle) if point else goal
+            geometry = goal if point is None else shapely.Point(point)
             shapely.prepare(geometry)
             found = self._goals[handle] = (geometry, self._field(geometry))
         return found
