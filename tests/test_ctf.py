@@ -533,6 +533,19 @@ def test_a_damaged_cache_file_is_solved_again(game, tmp_path, damage, caplog):
     assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "cache", "win": "cache"}
 
 
+def test_sets_a_process_loaded_are_read_again_once_a_file_changes(game, tmp_path, caplog):
+    """A process keeps what it loaded, with its files' stamps: a load after a
+    file was damaged in place (same size, same inode) sees it and solves."""
+    load_or_solve(game, "both", root=tmp_path)
+    kept = load_or_solve(game, "both", root=tmp_path)
+    assert load_or_solve(game, "both", root=tmp_path) is kept and kept.sources == {"return": "cache", "win": "cache"}
+    path = kept.paths["return"]
+    np.save(path, np.full_like(np.load(path), np.nan))
+    with caplog.at_level("WARNING", logger=ctf_cache.__name__):
+        assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "solved", "win": "cache"}
+    assert [r.getMessage().count("unreadable") for r in caplog.records] == [1]
+
+
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # the speeds overflow float32, as meant
 def test_the_solver_refuses_a_value_that_overflows_instead_of_converging_on_it():
     """Without the check a NaN value never changes between checks and counts as converged."""
