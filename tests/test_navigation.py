@@ -8,7 +8,7 @@ import pytest
 import shapely
 from shapely.geometry import Point, box
 
-from bearcat.agents.navigation import LOOK_AHEAD, Navigator
+from bearcat.agents.navigation import LOOK_AHEAD, Navigator, navigator
 from bearcat.maps import Map
 from bearcat.solvers.descent import descend
 
@@ -47,3 +47,18 @@ def test_it_goes_round_the_wall_and_stops_inside_the_goal():
     assert nav.toward(goal, np.array([34.0, 5.0])) is None  # its edge covers
     assert nav.toward((35.0, 5.0), (35.0, 5.0)) is None
     assert shapely.is_prepared(goal)  # asked for ten times a second: prepared once
+
+
+def test_games_on_one_map_share_its_navigator_while_the_map_lives():
+    import gc
+    import weakref
+
+    game_map = walled_map()
+    shared = navigator(game_map)
+    shared.toward((35.0, 5.0), np.array([5.0, 5.0]))
+    assert navigator(game_map) is shared and len(shared._fields) == 1
+    assert navigator(walled_map()) is not shared
+    gone = weakref.ref(shared)
+    del game_map, shared
+    gc.collect()
+    assert gone() is None

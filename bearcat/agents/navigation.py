@@ -4,12 +4,14 @@ shortest path around buildings, at the terrain's speeds.
 One fast-marching solve per goal gives the travel time to it from every
 node; the direction to walk is the first stretch of the steepest-descent
 path from where one stands. Solves are cached per goal, so an agent asking
-ten times a second pays for one solve.
+ten times a second pays for one solve, and ``navigator`` keeps one
+Navigator per map in a process, so game after game on a map pays for none.
 """
 
 from __future__ import annotations
 
 import math
+import weakref
 
 import numpy as np
 import shapely
@@ -93,6 +95,19 @@ class Navigator:
         return found
 
 
+_navigators: weakref.WeakKeyDictionary[Map, Navigator] = weakref.WeakKeyDictionary()
+
+
+def navigator(game_map: Map) -> Navigator:
+    """The Navigator of ``game_map`` at the default spacing, the same one for
+    every game on that map while the map lives."""
+    found = _navigators.get(game_map)
+    if found is None:
+        found = _navigators[game_map] = Navigator(game_map)
+    return found
+
+
 def _lengths(path: np.ndarray) -> np.ndarray:
     """The distance along ``path`` to each of its points."""
-    return np.cumsum(np.r_[0.0, np.hypot(*np.diff(path, axis=0).T)])
+    steps = np.diff(path, axis=0)
+    return np.cumsum(np.concatenate(([0.0], np.hypot(steps[:, 0], steps[:, 1]))))
