@@ -34,6 +34,7 @@ class Navigator:
         self.raster = rasterize(game_map, spacing or max(xmax - xmin, ymax - ymin) / 200)
         self.area = game_map.free_space
         self.grid = self.raster.grid
+        self._lo, self._hi = np.asarray(self.grid.lo), np.asarray(self.grid.hi)
         # Steps of half a spacing enough to walk LOOK_AHEAD twice over: the
         # path is traced that far, and all the way only where that falls short.
         self._ahead = int(math.ceil(4 * LOOK_AHEAD / min(self.grid.spacing))) + 8
@@ -48,7 +49,7 @@ class Navigator:
         p = np.asarray(position, float)
         if shapely.intersects_xy(goal_geometry, p[0], p[1]):  # a point intersects what covers it
             return None
-        p = np.clip(p, self.grid.lo, self.grid.hi)
+        p = np.minimum(np.maximum(p, self._lo), self._hi)  # np.clip's answer, without its checks
         i, j = self.grid.nearest_index(p)
         if not math.isfinite(phi[i, j]):
             return None

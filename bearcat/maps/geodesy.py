@@ -35,8 +35,9 @@ def _output(value):
 
 
 def _point(a, b) -> bool:
-    """Whether ``a`` and ``b`` are one coordinate each rather than arrays."""
-    return np.ndim(a) == 0 and np.ndim(b) == 0
+    """Whether ``a`` and ``b`` are one coordinate each rather than arrays
+    (floats, numpy's included, are asked first: they are most of the calls)."""
+    return (isinstance(a, float) or np.ndim(a) == 0) and (isinstance(b, float) or np.ndim(b) == 0)
 
 
 def to_local(lat, lon, origin: tuple[float, float]):

@@ -66,7 +66,8 @@ def descend(grid: Grid, phi, start, *, seeds=None, source=None, steps: int | Non
         seeds = np.asarray(seeds, dtype=np.bool_)
         if seeds.shape != grid.shape:
             raise InputError(f"seeds has shape {seeds.shape} but the grid has shape {grid.shape}")
-        stop |= seeds
+        # The kernel only reads where to stop: the seeds themselves do, unless a source adds to them.
+        stop = np.ascontiguousarray(seeds) if source is None else stop | seeds
     if source is not None:
         if not grid.contains(source):
             raise InputError(f"source point {format_point(source)} lies outside the grid")
