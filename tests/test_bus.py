@@ -170,6 +170,25 @@ def test_in_process_subscribers_get_matching_puts_with_the_sender():
     assert got == [(keys.fix(GAME, "a1"), b"x", "a")]
 
 
+def test_in_process_puts_reach_whoever_subscribes_opens_or_closes_between_them():
+    """Who receives a key is kept between puts: a subscription, a session and
+    a close made after the first put still count from the next one on."""
+    bus = InProcessBus()
+    a, b = bus.session("a"), bus.session("b")
+    got = []
+    key = keys.state(GAME)
+    a.put(key, b"1")
+    b.subscribe(key, lambda k, p, s: got.append(("b", p)))
+    a.put(key, b"2")
+    c = bus.session("c")
+    c.subscribe(keys.every(GAME, "state"), lambda k, p, s: got.append(("c", p)))
+    b.subscribe(key, lambda k, p, s: got.append(("b again", p)))
+    a.put(key, b"3")
+    b.close()
+    a.put(key, b"4")
+    assert got == [("b", b"2"), ("b", b"3"), ("b again", b"3"), ("c", b"3"), ("c", b"4")]
+
+
 def test_in_process_liveliness_has_history_and_vanishes_on_close():
     bus = InProcessBus()
     a, b = bus.session("a"), bus.session("b")

@@ -334,6 +334,29 @@ def test_region_polygons_are_valid_geometries(first_game):
     assert not invalid, invalid
 
 
+def test_region_outlines_are_traced_as_contourpys_own_generator_traces_them():
+    """The generator the queries build directly gives what
+    ``contourpy.contour_generator`` gives, point for point, also where
+    values are not finite (masked, as it masks them)."""
+    import contourpy
+
+    from bearcat.solvers.ctf_queries import _filled_contours
+
+    rng = np.random.default_rng(0)
+    for trial in range(60):
+        nx, ny = rng.integers(2, 40, 2)
+        x, y = np.sort(rng.uniform(0, 100, nx)), np.sort(rng.uniform(0, 100, ny))
+        z = rng.normal(size=(ny, nx)).cumsum(0).cumsum(1)
+        z[rng.random(z.shape) < 0.05 * (trial % 3)] = [np.inf, np.nan][trial % 2]
+        expected = contourpy.contour_generator(x, y, z, fill_type="OuterOffset")
+        traced = _filled_contours(*np.meshgrid(x, y), z)
+        for lower, upper in ((-5.0, 0.0), (0.0, 5.0)):
+            (points, offsets), (want_points, want_offsets) = traced.filled(lower, upper), expected.filled(lower, upper)
+            assert len(points) == len(want_points)
+            for got, want in zip([*points, *offsets], [*want_points, *want_offsets]):
+                np.testing.assert_array_equal(got, want)
+
+
 def test_headings_are_unit_vectors(first_game, weno_game):
     for queries in (first_game, weno_game):
         for phase in ("capture", "return"):
@@ -508,6 +531,19 @@ def test_a_damaged_cache_file_is_solved_again(game, tmp_path, damage, caplog):
     assert again.sources == {"return": "solved", "win": "cache"}
     np.testing.assert_array_equal(again.solution.sets["return"].value, first.solution.sets["return"].value)
     assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "cache", "win": "cache"}
+
+
+def test_sets_a_process_loaded_are_read_again_once_a_file_changes(game, tmp_path, caplog):
+    """A process keeps what it loaded, with its files' stamps: a load after a
+    file was damaged in place (same size, same inode) sees it and solves."""
+    load_or_solve(game, "both", root=tmp_path)
+    kept = load_or_solve(game, "both", root=tmp_path)
+    assert load_or_solve(game, "both", root=tmp_path) is kept and kept.sources == {"return": "cache", "win": "cache"}
+    path = kept.paths["return"]
+    np.save(path, np.full_like(np.load(path), np.nan))
+    with caplog.at_level("WARNING", logger=ctf_cache.__name__):
+        assert load_or_solve(game, "both", root=tmp_path).sources == {"return": "solved", "win": "cache"}
+    assert [r.getMessage().count("unreadable") for r in caplog.records] == [1]
 
 
 @pytest.mark.filterwarnings("ignore:overflow encountered:RuntimeWarning")  # the speeds overflow float32, as meant

@@ -327,6 +327,18 @@ def test_descend_stops_at_seeds():
     assert d.points[-1][1] == pytest.approx(3.0, abs=0.3)
 
 
+def test_a_descent_cut_short_is_the_start_of_the_whole_one():
+    g = square(41)
+    x, _y = g.mesh()
+    seeds = x <= 1.0
+    phi = travel_time(np.ones(g.shape), g.spacing, np.where(seeds, 0.0, np.inf))
+    whole = descend(g, phi, (8.0, 3.0), seeds=seeds)
+    start = descend(g, phi, (8.0, 3.0), seeds=seeds, steps=5)
+    assert len(whole.points) > 6 and len(start.points) == 6 and not start.reached
+    np.testing.assert_array_equal(start.points, whole.points[:6])
+    np.testing.assert_array_equal(start.values, whole.values[:6])
+
+
 @pytest.mark.parametrize(
     "kwargs, culprit",
     [

@@ -234,6 +234,21 @@ def test_a_warmed_up_advisor_answers_every_fix_as_a_fresh_one_does(ctf10_game):
     assert warmed("a", fixes, 3.0) == fresh("a", fixes, 3.0)
 
 
+def test_an_answer_after_either_player_moved_is_the_one_a_fresh_advisor_gives(ctf10_game):
+    """The region an agent is sent depends on its own fix only, and is kept
+    while the other player moves: every answer, region included, is still
+    the one an advisor that never answered before gives."""
+    ctf10, queries = ctf10_game
+    advisor = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+    fixes = LatestFixes(ctf10)
+    moves = [("a", (2.0, 2.0)), ("d", (6.0, 6.0)), ("d", (7.0, 5.0)), ("a", (3.0, 2.5)), ("d", (2.0, 6.0))]
+    for t, (mover, where) in enumerate(moves, start=1):
+        fixes.take(fix(ctf10, mover, where, float(t)))
+        for agent in ("a", "d"):
+            fresh = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+            assert advisor(agent, fixes, t + 0.5) == fresh(agent, fixes, t + 0.5)
+
+
 def test_robust_open_loop_guidance_grows_each_defenders_capture_disk_by_its_uncertainty():
     """Fresh exact fixes give the plain answer; a defender fix grown stale
     (a 10 m/s defender whose fix is 11 s old may be 110 m away) cuts the safe

@@ -70,6 +70,18 @@ def test_origin_maps_to_zero_and_scalars_stay_scalars():
     assert lat.shape == (3, 2) and np.allclose(lat, ORIGIN[0]) and np.allclose(lon, ORIGIN[1])
 
 
+def test_one_point_converts_to_the_same_numbers_as_an_array_of_them():
+    m = small_map()
+    rng = np.random.default_rng(2)
+    x, y = rng.uniform(-2000, 2000, (2, 200))
+    lat, lon = m.to_geodetic(x, y)
+    east, north = m.to_local(lat, lon)
+    for k in range(len(x)):
+        assert m.to_geodetic(x[k], y[k]) == (lat[k], lon[k])
+        assert m.to_local(float(lat[k]), np.float64(lon[k])) == (east[k], north[k])
+    assert all(isinstance(v, float) for v in m.to_geodetic(np.array(1.0), 2.0))
+
+
 # --- model -----------------------------------------------------------------
 
 

@@ -54,6 +54,18 @@ def test_the_same_seed_gives_the_same_event_log_and_another_seed_does_not(tmp_pa
     assert a != c
 
 
+def test_a_game_without_an_event_log_counts_what_one_with_a_log_records(tmp_path):
+    scenario = load_scenario(write_scenario(tmp_path))
+    logged, events = (
+        simulate(scenario, seed=3, events=tmp_path / "events.jsonl"),
+        read_events(tmp_path / "events.jsonl"),
+    )
+    unlogged = simulate(scenario, seed=3)
+    assert unlogged == logged
+    kinds = [e["event"] if e["event"] != "impaired" else f"impaired:{e['action']}" for e in events]
+    assert logged.counts == {kind: kinds.count(kind) for kind in set(kinds) if kind != "outcome"}
+
+
 def play_with_a_faulty_ground_station(tmp_path, name, seed=2):
     """A game whose guidance service raises on every fourth fix of the
     attacker and on every seventh tick."""

@@ -145,7 +145,7 @@ class LinkState:
                     if way != "stream":
                         return Fate((), "outage")
                     start, reasons = now + (outage.end - game_time), [*reasons, "outage"]
-        if m.idle_after > 0 and start - self.last_sent > m.idle_after and np.isfinite(self.last_sent):
+        if m.idle_after > 0 and start - self.last_sent > m.idle_after and math.isfinite(self.last_sent):
             start += rng.uniform(*m.promotion)
             reasons.append("promotion")
         self.last_sent = start
@@ -179,7 +179,7 @@ class LinkState:
         return Fate(tuple(copies))
 
     def _stream(self, start: float, packets: int, reasons: list[str]) -> Fate:
-        if np.isfinite(self.last_entry):
+        if math.isfinite(self.last_entry):
             self.gap += 0.2 * (min(start - self.last_entry, 1.0) - self.gap)
         self.last_entry = start
         retransmitted = 0
@@ -208,7 +208,7 @@ class LinkState:
         """When the congestion window lets ``packets`` more go, after a timeout:
         slow start sends one packet in the first round trip, two in the
         next, four..., so what the stream took meanwhile waits its round."""
-        if not np.isfinite(self.slow_start) or start < self.slow_start or self.tcp.srtt <= 0:
+        if not math.isfinite(self.slow_start) or start < self.slow_start or self.tcp.srtt <= 0:
             return start
         self.sent_since += packets
         rounds = math.ceil(math.log2(self.sent_since + 1)) - 1  # the round whose window lets the last one go
@@ -226,7 +226,7 @@ class LinkState:
         if m.jitter_time <= 0:
             return m.delay.sample(self.rng)
         if t > self.scored_at:
-            a = math.exp(-(t - self.scored_at) / m.jitter_time) if np.isfinite(self.scored_at) else 0.0
+            a = math.exp(-(t - self.scored_at) / m.jitter_time) if math.isfinite(self.scored_at) else 0.0
             self.score = a * self.score + math.sqrt(1.0 - a * a) * float(self.rng.standard_normal())
             self.scored_at = t
         return m.delay.at(self.score)

@@ -134,6 +134,7 @@ class Shim:
         if dead_zones is not None and where is None:
             raise BusError("dead zones need a 'where' that gives each peer's position")
         self.model = model
+        self._ideal = model.ideal  # asked on every message; a model is frozen
         self.seed = int(seed)
         self.dead_zones = dead_zones
         if dead_zones is not None:
@@ -190,7 +191,7 @@ class Shim:
         reliable, exempt = _kind(key)
         reliable = reliable or self.transport == "tcp"  # over tcp/ every message rides the TCP stream
         local = sender == receiver or (sender in self.colocated and receiver in self.colocated)
-        if exempt or local or (self.model.ideal and not self.faulted and not self.degradations):
+        if exempt or local or (self._ideal and not self.faulted and not self.degradations):
             return [Delivery(now, payload)]
         blocked = self._blocked(sender, receiver, now)
         if blocked is not None:

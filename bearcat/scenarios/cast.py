@@ -44,7 +44,7 @@ from bearcat.agents.human import behaviours
 from bearcat.agents.human.agent import HumanAgent
 from bearcat.agents.human.phone import Phone
 from bearcat.agents.human.walker import Walker
-from bearcat.agents.navigation import Navigator
+from bearcat.agents.navigation import Navigator, navigator
 from bearcat.agents.uav.agent import UavAgent
 from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.autopilot import SimulatedAutopilot
@@ -386,7 +386,7 @@ class _CtfGame:
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:
-            self._navigator = Navigator(self.scenario.map)
+            self._navigator = navigator(self.scenario.map)
         attacking = spec.team == "attacker"
         opponent = self.defender if attacking else self.attacker
         forbidden = None if attacking else self.flag.union(self.home)
@@ -436,7 +436,7 @@ class _PursuitGame:
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:
-            self._navigator = Navigator(self.scenario.map)
+            self._navigator = navigator(self.scenario.map)
         opponents = tuple(p.id for p in self.pursuers) if spec.team == "evader" else (self.evader.id,)
         situation = behaviours.Situation(spec.id, spec.team, opponents, None, None, self._navigator)
         return _person(self.scenario, spec, profile, seed, situation, {}, "capture")
@@ -493,7 +493,7 @@ class _ReachAvoidGame:
 
     def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
         if self._navigator is None:
-            self._navigator = Navigator(self.scenario.map)
+            self._navigator = navigator(self.scenario.map)
         opponents = tuple(d.id for d in self.defenders) if spec.team == "attacker" else (self.attacker.id,)
         situation = behaviours.Situation(spec.id, spec.team, opponents, self.goals["capture"], None, self._navigator)
         return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture")

@@ -37,7 +37,7 @@ class Descent:
     reached: bool
 
 
-def descend(grid: Grid, phi, start, *, seeds=None, source=None) -> Descent:
+def descend(grid: Grid, phi, start, *, seeds=None, source=None, steps: int | None = None) -> Descent:
     """Follow ``x' = -grad phi / |grad phi|`` from ``start`` until the seeds.
 
     This integrates the optimal-path ODE (thesis 4.12) backwards in time.
@@ -51,6 +51,10 @@ def descend(grid: Grid, phi, start, *, seeds=None, source=None) -> Descent:
     gradient. A step that would leave the finite part of ``phi`` or not lower
     the value is replaced by a move to the lowest finite neighbouring node, so
     the path never enters an obstacle or the unsafe set, and ends.
+
+    With ``steps``, the path stops after that many steps, not ``reached``:
+    a walker looking a few metres ahead needs only the start of its path,
+    which is the start of the whole one, point for point.
     """
     phi = np.ascontiguousarray(phi, dtype=np.float64)
     if phi.shape != grid.shape:
@@ -62,7 +66,8 @@ def descend(grid: Grid, phi, start, *, seeds=None, source=None) -> Descent:
         seeds = np.asarray(seeds, dtype=np.bool_)
         if seeds.shape != grid.shape:
             raise InputError(f"seeds has shape {seeds.shape} but the grid has shape {grid.shape}")
-        stop |= seeds
+        # The kernel only reads where to stop: the seeds themselves do, unless a source adds to them.
+        stop = np.ascontiguousarray(seeds) if source is None else stop | seeds
     if source is not None:
         if not grid.contains(source):
             raise InputError(f"source point {format_point(source)} lies outside the grid")
@@ -70,9 +75,8 @@ def descend(grid: Grid, phi, start, *, seeds=None, source=None) -> Descent:
         stop[ix, iy] = True
     hx, hy = grid.spacing
     fi = grid.fractional_index(start)
-    xs, ys, vals, status = _descend(
-        phi, stop, float(hx), float(hy), float(fi[0]), float(fi[1]), np.int64(4 * grid.size + 16)
-    )
+    limit = 4 * grid.size + 16 if steps is None else min(int(steps), 4 * grid.size + 16)
+    xs, ys, vals, status = _descend(phi, stop, float(hx), float(hy), float(fi[0]), float(fi[1]), np.int64(limit))
     if status == _START_INVALID:
         raise InputError(f"start point {format_point(start)} is not on a finite value of phi")
     points = np.asarray(grid.lo) + np.column_stack([xs, ys]) * np.asarray(grid.spacing)

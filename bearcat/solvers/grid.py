@@ -100,8 +100,7 @@ class Grid:
     def nearest_index(self, point) -> tuple[int, ...]:
         """The node closest to ``point``, clipped into the grid."""
         k = np.rint(self.fractional_index(point)).astype(int)
-        k = np.clip(k, 0, np.asarray(self.shape) - 1)
-        return tuple(int(v) for v in k)
+        return tuple(min(max(int(v), 0), n - 1) for v, n in zip(k, self.shape))
 
     def point(self, index) -> np.ndarray:
         """Coordinates of the node at ``index``."""

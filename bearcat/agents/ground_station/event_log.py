@@ -57,6 +57,8 @@ class EventLog:
     def sent(self, t: float, sender: str, key: str, message: Message, size: int | None = None) -> None:
         """``message`` went out on ``key``; ``size``: its payload's bytes, where known."""
         self.last[key] = message
+        if not self._tally("sent"):
+            return
         if self.bodiless and keys.parse(key).kind in self.bodiless:
             seq = getattr(message, "seq", None)
             self._write({"event": "sent", "t": t, "sender": sender, "key": key, "seq": seq, "size": size})
@@ -64,12 +66,18 @@ class EventLog:
         self._write({"event": "sent", "t": t, "sender": sender, "key": key, "message": msgspec.to_builtins(message)})
 
     def received(self, t: float, sender: str, receiver: str, key: str, seq: int | None = None) -> None:
-        self._write({"event": "received", "t": t, "sender": sender, "receiver": receiver, "key": key, "seq": seq})
+        if self._tally("received"):
+            self._write({"event": "received", "t": t, "sender": sender, "receiver": receiver, "key": key, "seq": seq})
 
     def refused(self, t: float, sender: str, receiver: str, key: str, reason: str) -> None:
-        self._write({"event": "refused", "t": t, "sender": sender, "receiver": receiver, "key": key, "reason": reason})
+        if self._tally("refused"):
+            self._write(
+                {"event": "refused", "t": t, "sender": sender, "receiver": receiver, "key": key, "reason": reason}
+            )
 
     def impaired(self, record: Impairment) -> None:
+        if not self._tally(f"impaired:{record.action}"):
+            return
         self._write(
             {
                 "event": "impaired",
@@ -85,7 +93,8 @@ class EventLog:
         )
 
     def note(self, t: float, event: str, /, **fields) -> None:
-        self._write({"event": event, "t": t, **fields})
+        if self._tally(event):
+            self._write({"event": event, "t": t, **fields})
 
     def close(self) -> None:
         if self._fd is not None:
@@ -94,12 +103,16 @@ class EventLog:
         if self.lost:
             log.error("%s lost %d line(s) the disk refused: %s", self.path, self.lost, self.failure)
 
-    def _write(self, record: dict) -> None:
-        event = record["event"] if record["event"] != "impaired" else f"impaired:{record['action']}"
+    def _tally(self, event: str) -> bool:
+        """Count an ``event``; whether it has a file to go to. A log that only
+        counts (the benchmarks', a study's that reads no log) builds no line."""
         self.counts[event] = self.counts.get(event, 0) + 1
+        return self._fd is not None
+
+    def _write(self, record: dict) -> None:
+        """Append ``record`` (counted already) as one line."""
         fd = self._fd
-        if fd is None:
-            return
+        assert fd is not None  # only a log with a file writes
         line = (json.dumps(record, separators=(",", ":")) + "\n").encode()
         try:
             written = os.write(fd, line)

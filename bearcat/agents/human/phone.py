@@ -147,6 +147,7 @@ class Display:
         self.screen = Screen()
         self._region_shown: list = []
         self._region_local: list[np.ndarray] = []
+        self._places: dict[str, tuple[tuple[float, float], np.ndarray]] = {}
 
     def show(self, guidance: Guidance, now: float) -> None:
         """Put ``guidance`` on the screen at ``now`` (an older one than shown is ignored)."""
@@ -166,7 +167,18 @@ class Display:
         for r in guidance.reports:
             old = s.reports.get(r.agent)
             if old is None or r.t >= old.t:
-                s.reports[r.agent] = Sighting(np.array(self.map.to_local(r.lat, r.lon)), r.t, r.radius)
+                s.reports[r.agent] = Sighting(self._place(r.agent, r.lat, r.lon), r.t, r.radius)
+
+    def _place(self, agent: str, lat: float, lon: float) -> np.ndarray:
+        """Where a report at ``(lat, lon)`` puts ``agent``, in map metres. Each
+        fix comes back in every guidance until the next, ten times a second:
+        it is converted once (and the array is read-only, as it is shared)."""
+        held = self._places.get(agent)
+        if held is None or held[0] != (lat, lon):
+            position = np.array(self.map.to_local(lat, lon))
+            position.flags.writeable = False
+            held = self._places[agent] = ((lat, lon), position)
+        return held[1]
 
     def _to_local(self, points) -> np.ndarray:
         """A ring or line of the wire's ``[lon, lat]`` points in map metres."""

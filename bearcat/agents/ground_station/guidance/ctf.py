@@ -120,6 +120,7 @@ class CtfAdvisor:
         self._simplify = 0.25 * spacing
         self._region_step = 0.5 * spacing
         self._regions: dict[str, tuple[tuple, list]] = {}
+        self._outlines: dict[str, tuple[tuple, list]] = {}
         self._last: dict[str, tuple[tuple, dict]] = {}
 
     def warm_up(self, starts) -> None:
@@ -274,24 +275,13 @@ class CtfAdvisor:
         except InputError as exc:
             return {"game": "ctf", "note": str(exc)[:200]}
         if agent == self.attacker:
-            values, side, region_of, heading = (
-                self.solved.defender_region_values(a, self.phase),
-                "defender",
-                self.defender,
-                report.attacker_heading,
-            )
+            side, region_of, heading, own = "defender", self.defender, report.attacker_heading, a
         else:
-            values, side, region_of, heading = (
-                self.solved.attacker_region_values(d, self.phase),
-                "attacker",
-                self.attacker,
-                report.defender_heading,
-            )
-        region = polygon_rings(self.solved.polygons(values, side))
+            side, region_of, heading, own = "attacker", self.attacker, report.defender_heading, d
         return {
             "game": "ctf",
             "heading": None if heading is None else bearing(*heading),
-            "region": on_the_wire(self.map, region, self._simplify),
+            "region": self._region(side, own),
             "region_of": region_of,
             "go": report.winner == "attacker" if agent == self.attacker else None,
             "value": float(report.value),
@@ -317,6 +307,22 @@ class CtfAdvisor:
     def coarse(self, radius: float) -> float:
         """``radius`` rounded up to half a cell: for what is redrawn only when a set grows by that much."""
         return float(np.ceil(radius / self._region_step) * self._region_step)
+
+    def _region(self, side: str, where: np.ndarray) -> list:
+        """The region of ``side`` against the other player at ``where``, as
+        sent. It depends on that one position and the phase, while the
+        answer it goes out in changes with either player's fix: it is kept
+        until they change."""
+        key = (side, where[0], where[1], self.phase)
+        held = self._outlines.get(side)
+        if held is None or held[0] != key:
+            if side == "defender":
+                values = self.solved.defender_region_values(where, self.phase)
+            else:
+                values = self.solved.attacker_region_values(where, self.phase)
+            rings = on_the_wire(self.map, polygon_rings(self.solved.polygons(values, side)), self._simplify)
+            held = self._outlines[side] = (key, rings)
+        return held[1]
 
     def _robust_region(self, side: str, where: np.ndarray, radius: float) -> list:
         """The opponent's region against the worst of ``side``'s own set, as
