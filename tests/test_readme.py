@@ -61,10 +61,14 @@ def test_the_readme_is_a_front_door():
     ]
 
 
+def unfenced(text: str) -> str:
+    """The text outside fenced code blocks, where headings are headings."""
+    return re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
+
+
 def prose(text: str) -> str:
     """The text outside fenced code blocks and inline code, where links are links."""
-    text = re.sub(r"^```.*?^```", "", text, flags=re.S | re.M)
-    return re.sub(r"`[^`\n]*`", "", text)
+    return re.sub(r"`[^`\n]*`", "", unfenced(text))
 
 
 def slug(heading: str) -> str:
@@ -77,7 +81,7 @@ def slug(heading: str) -> str:
 
 
 def anchors(page: Path) -> set[str]:
-    return {slug(h) for h in re.findall(r"^#{1,6} (.+?)\s*#*$", prose(page.read_text()), flags=re.M)}
+    return {slug(h) for h in re.findall(r"^#{1,6} (.+?)\s*#*$", unfenced(page.read_text()), flags=re.M)}
 
 
 LINKS = [
