@@ -15,10 +15,15 @@ import os
 import re
 import shutil
 import time
+from importlib import resources
 
 import pytest
 
 from bearcat.agents.ground_station.event_log import read_events
+from bearcat.agents.human.page_phone import PagePhone
+from bearcat.bus import keys
+from bearcat.bus.messages import Guidance, Report
+from bearcat.maps import load_map
 from bearcat.runtime.launch import free_port
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import start_launcher
@@ -184,3 +189,98 @@ def test_three_screenshots_of_the_game(played):
     images = [s.read_bytes() for s in shots]
     assert all(i.startswith(b"\x89PNG") and len(i) > 5000 for i in images)
     assert len(set(images)) == 3
+
+
+# ---------------------------------------------------------------- the page alone, fed a view
+
+
+CENTRE, MAJOR, MINOR, BEARING = (25.0, 30.0), 14.0, 6.0, 30.0  # the defender's predicted position and ellipse
+
+
+def _pixels_around(page, points: dict, reach: int = 2) -> dict:
+    """The RGB of the canvas's pixels within ``reach`` of each map point (metres),
+    placed as the page places them: the field fitted to the canvas, 10 px of
+    margin, north up."""
+    script = """([bounds, points, reach]) => {
+      const canvas = document.getElementById("map"), g = canvas.getContext("2d");
+      const ratio = canvas.width / canvas.clientWidth, w = canvas.clientWidth, h = canvas.clientHeight;
+      const [x0, y0, x1, y1] = bounds;
+      const scale = Math.min((w - 20) / (x1 - x0), (h - 20) / (y1 - y0));
+      const ox = (w - scale * (x1 - x0)) / 2, oy = (h - scale * (y1 - y0)) / 2;
+      const out = {};
+      for (const [name, [x, y]] of Object.entries(points)) {
+        const px = Math.round((ox + (x - x0) * scale) * ratio), py = Math.round((h - oy - (y - y0) * scale) * ratio);
+        const d = g.getImageData(px - reach, py - reach, 2 * reach + 1, 2 * reach + 1).data;
+        out[name] = [];
+        for (let i = 0; i < d.length; i += 4) out[name].push([d[i], d[i + 1], d[i + 2]]);
+      }
+      return out;
+    }"""
+    return page.evaluate(script, [[0.0, 0.0, 50.0, 50.0], points, reach])
+
+
+def _bright(pixels) -> bool:
+    """Whether any pixel is white or grey (the ellipse's and the disks' strokes), not a colour or the ground."""
+    return any(min(p) >= 120 for p in pixels)
+
+
+def test_the_page_draws_the_predicted_position_inside_its_ellipse_turned_by_its_bearing():
+    """A view with a calibrated report, as the bridge sends it: the page
+    draws the defender's predicted position joined to its fix, and the
+    ellipse passes through the ends of both axes, turned by the bearing
+    (clockwise from north, with the canvas's y pointing down), not through
+    the points a swapped axis or a mirrored turn would give; the report
+    without a prediction keeps its disk, the one with it has none."""
+    from playwright import sync_api
+
+    phone = PagePhone("g", "attacker", load_map("field-50"))
+    m = phone.map
+    fix_d, fix_a = (10.0, 42.0), (40.0, 10.0)
+    (d_lat, d_lon), (a_lat, a_lon), (p_lat, p_lon) = (m.to_geodetic(*p) for p in (fix_d, fix_a, CENTRE))
+    reports = [
+        Report("defender", 9.0, d_lat, d_lon, radius=8.0, predicted=(p_lon, p_lat), ellipse=(MAJOR, MINOR, BEARING)),
+        Report("attacker", 9.5, a_lat, a_lon, radius=5.0),
+    ]
+    phone.handle(
+        keys.guidance("g", "attacker"), Guidance(agent="attacker", seq=1, t=10.0, game="ctf", reports=reports), 10.0
+    )
+    messages = [{"type": "map", "map": phone.map_view()}, {"type": "view", "view": phone.view(10.0)}]
+
+    b = math.radians(BEARING)
+    along, across = (math.sin(b), math.cos(b)), (math.cos(b), -math.sin(b))  # east, north
+
+    def off(axis, metres):
+        return (CENTRE[0] + metres * axis[0], CENTRE[1] + metres * axis[1])
+
+    points = {
+        "major ahead": off(along, MAJOR),
+        "major behind": off(along, -MAJOR),
+        "minor right": off(across, MINOR),
+        "minor left": off(across, -MINOR),
+        "minor along the major axis": off(along, MINOR),
+        "major along the minor axis": off(across, MAJOR),
+        "major mirrored": (CENTRE[0] - MAJOR * along[0], CENTRE[1] + MAJOR * along[1]),
+        "predicted": CENTRE,
+        "between fix and prediction": ((fix_d[0] + CENTRE[0]) / 2, (fix_d[1] + CENTRE[1]) / 2),
+        "defender's disk": (fix_d[0], fix_d[1] - 8.0),
+        "attacker's disk": (fix_a[0], fix_a[1] - 5.0),
+    }
+    with sync_api.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=["--no-sandbox"])
+        try:
+            page = browser.new_page(viewport={"width": 390, "height": 760}, device_scale_factor=2)
+            index = resources.files("bearcat.agents.human").joinpath("page/index.html").read_text()
+            page.route("https://phone.test/**", lambda route: route.fulfill(body=index, content_type="text/html"))
+            page.route_web_socket(
+                re.compile(r"wss://phone\.test/ws.*"), lambda ws: [ws.send(json.dumps(message)) for message in messages]
+            )
+            page.goto("https://phone.test/?token=t")
+            page.wait_for_function("state.map !== null && state.view !== null")
+            page.evaluate("draw()")
+            seen = _pixels_around(page, points)
+        finally:
+            browser.close()
+    drawn = {name for name, pixels in seen.items() if _bright(pixels)}
+    assert drawn == {"major ahead", "major behind", "minor right", "minor left", "attacker's disk"}, drawn
+    magenta = {name for name, pixels in seen.items() if any(r > 200 and g < 60 and bl > 200 for r, g, bl in pixels)}
+    assert {"predicted", "between fix and prediction"} <= magenta, magenta

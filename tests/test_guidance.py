@@ -4,6 +4,7 @@ boundaries, and positions a fix put inside a building moved out first.
 Regions go out as GeoJSON-ordered ``[lon, lat]`` rings and land on the
 phone's screen where the solver put them."""
 
+import msgspec
 import numpy as np
 import pytest
 import shapely
@@ -11,6 +12,7 @@ from scipy import ndimage
 
 from bearcat.agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty
+from bearcat.agents.ground_station.tracker import Trackers
 from bearcat.agents.human.phone import Phone
 from bearcat.bus import keys
 from bearcat.bus.codec import decode, encode
@@ -187,6 +189,40 @@ def test_each_report_carries_the_disk_its_agent_may_be_in():
     phone = Phone("a", field, gps=GpsError(), compass=CompassError(), rng=np.random.default_rng(0))
     phone.show(decode(encode(to_a.message), keys.guidance("g", "a")), 1.6)
     assert phone.screen.reports["b"].radius == pytest.approx(0.9, abs=0.01)
+
+
+def test_the_phone_shows_where_the_tracker_believes_each_agent_is_with_its_ellipse():
+    """A tracked report lands on the screen at the tracker's belief (metres)
+    with the belief's 95 % ellipse, bearing in radians; an untracked one has
+    neither. A point the next guidance repeats is not converted again."""
+    field = load_map("field-50")
+    fixes = LatestFixes(field, Trackers(field, GpsError(), CompassError()))
+    walk = np.array([0.8, 0.6])  # 2 m/s east-north-east
+    for k in range(6):
+        fixes.take(fix(field, "b", np.array([10.0, 10.0]) + 2.0 * k * walk, float(k), accuracy=1.0))
+    fixes.take(fix(field, "a", (40.0, 40.0), 4.0))
+    now = 6.5
+    belief = fixes.beliefs(now)["b"]
+    sent = Guidance(agent="a", seq=1, t=now, game="ctf", reports=fixes.reports(now))
+    phone = Phone("a", field, gps=GpsError(), compass=CompassError(), rng=np.random.default_rng(0))
+    phone.show(decode(encode(sent), keys.guidance("g", "a")), now)
+    seen = phone.screen.reports["b"]
+    assert seen.predicted is not None and seen.ellipse is not None
+    assert np.hypot(*(seen.predicted - belief.position)) < 0.05  # the wire rounds to 1e-7 degrees
+    assert np.dot(seen.predicted - seen.position, walk) > 2.0  # ahead of the fix, where the walk went on
+    major, minor, bearing = belief.ellipse()
+    assert seen.ellipse[:2] == pytest.approx((major, minor), abs=0.01)
+    assert seen.ellipse[2] == pytest.approx(np.radians(bearing), abs=np.radians(0.06))
+    assert seen.ellipse[0] >= seen.ellipse[1] > 0.0
+
+    plain = [msgspec.structs.replace(r, predicted=None, ellipse=None) if r.agent == "a" else r for r in sent.reports]
+    phone.show(msgspec.structs.replace(sent, seq=2, t=now + 0.1, reports=plain), now + 0.1)
+    assert phone.screen.reports["b"].predicted is seen.predicted  # the same point, converted once
+    assert phone.screen.reports["a"].predicted is None and phone.screen.reports["a"].ellipse is None
+    later = fixes.reports(now + 1.0)
+    phone.show(msgspec.structs.replace(sent, seq=3, t=now + 1.0, reports=later), now + 1.0)
+    moved = phone.screen.reports["b"].predicted
+    assert moved is not seen.predicted and np.dot(moved - seen.predicted, walk) > 1.0
 
 
 def test_robust_advice_is_the_plain_one_for_fresh_exact_fixes_and_cautious_for_stale_ones(ctf10_game):

@@ -86,3 +86,33 @@ def test_the_view_is_the_screen_at_now(phone):
     assert view["fix"]["accuracy"] == pytest.approx(9.79) and view["fix"]["age"] == pytest.approx(1.0)
     shown = phone.map_view()
     assert shown["bounds"] == [0.0, 0.0, 50.0, 50.0] and set(shown["regions"]) == {"home", "flag"}
+
+
+def test_the_view_carries_each_reports_prediction_and_ellipse_in_map_metres(phone):
+    """A calibrated report's prediction is drawn in the frame the page draws
+    the fix in, and its ellipse keeps the wire's axes and bearing; a report
+    without one is drawn as before, fix and disk."""
+    fix_lat, fix_lon = phone.map.to_geodetic(30.0, 40.0)
+    lat, lon = phone.map.to_geodetic(24.0, 31.5)
+    reports = [
+        Report(
+            agent="defender",
+            t=99.0,
+            lat=fix_lat,
+            lon=fix_lon,
+            radius=5.0,
+            predicted=(lon, lat),
+            ellipse=(6.5, 2.25, 152.5),
+        ),
+        Report(agent="attacker", t=99.5, lat=lat, lon=lon, radius=3.0),
+    ]
+    phone.handle(
+        keys.guidance(GAME, "attacker"), Guidance(agent="attacker", seq=1, t=100.0, game="ctf", reports=reports), 100.0
+    )
+    attacker, defender = phone.view(100.5)["reports"]
+    assert math.dist((defender["x"], defender["y"]), (30.0, 40.0)) < 1e-6
+    sent_lon, sent_lat = reports[0].predicted
+    assert math.dist(defender["predicted"], phone.map.to_local(sent_lat, sent_lon)) < 1e-6
+    assert math.dist(defender["predicted"], (24.0, 31.5)) < 1e-6
+    assert defender["ellipse"] == pytest.approx([6.5, 2.25, 152.5])
+    assert attacker["predicted"] is None and attacker["ellipse"] is None and attacker["radius"] == 3.0

@@ -6,7 +6,8 @@ codec checks as any fix on the bus, and a bad one is dropped, counted by
 reason, and never sent. The fixes go out on the next tick. What comes back
 from the ground station goes on the same ``Display`` the emulated phone
 uses, and ``view`` is that screen as the page draws it: map metres, ages
-in seconds at ``now``, the game's phase and verdict.
+in seconds at ``now``, the game's phase and verdict, and each report's
+predicted position and 95 % ellipse where calibrated guidance sent them.
 
 No socket here: the bridge (``browser_bridge``) carries the page's
 messages in and the views out.
@@ -132,6 +133,8 @@ class PagePhone:
                     "y": float(seen.position[1]),
                     "age": now - seen.t,
                     "radius": seen.radius,
+                    "predicted": None if seen.predicted is None else [float(v) for v in seen.predicted],
+                    "ellipse": _ellipse(seen.ellipse),
                 }
                 for name, seen in sorted(s.reports.items())
             ],
@@ -175,6 +178,16 @@ class PagePhone:
 def _outline(geometry: Polygon | MultiPolygon) -> Polygon:
     """The one polygon the page draws for a region: the region, or its largest part."""
     return geometry if isinstance(geometry, Polygon) else max(geometry.geoms, key=lambda part: part.area)
+
+
+def _ellipse(ellipse: tuple[float, float, float] | None) -> list[float] | None:
+    """A sighting's 95 % ellipse as the page draws it: semi-major and
+    semi-minor axes in metres, the major axis's bearing in degrees clockwise
+    from north, as on the wire (the page turns it to the canvas's angle)."""
+    if ellipse is None:
+        return None
+    major, minor, bearing = ellipse
+    return [major, minor, math.degrees(bearing) % 180.0]
 
 
 def _points(points) -> list[list[float]]:

@@ -5,8 +5,10 @@ time-correlated bias, worse near buildings, with dropouts) and compass
 error, as WGS84 positions. What comes back (guidance from the ground
 station) becomes the ``Screen``: the opponent's winning region, the heading
 ring, go / no-go, and every agent as last reported with that report's time
-and the disk it may be in, so a behaviour or a person reads exactly what the
-display shows, stale positions included, and the recorder can draw it.
+and the disk it may be in (with calibrated guidance, also where its tracker
+expects it now, inside a 95 % ellipse), so a behaviour or a person reads
+exactly what the display shows, stale positions included, and the recorder
+can draw it.
 """
 
 from __future__ import annotations
@@ -26,11 +28,19 @@ from bearcat.netem.models import CompassError, CompassTrack, GpsError, GpsTrack
 @dataclass(frozen=True)
 class Sighting:
     """An agent as the screen shows it: where (map metres), the time of the
-    fix, and the radius of the disk it may be in by then (None: not known)."""
+    fix, and the radius of the disk it may be in by then (None: not known).
+    Where calibrated guidance tracks it, ``predicted`` is where its tracker
+    believes it is at the guidance's time (map metres) and ``ellipse`` that
+    belief's 95 % ellipse: semi-major and semi-minor axes in metres and the
+    major axis's bearing in radians clockwise from north (both None where
+    the report has no prediction): a fix seconds old says less than where
+    the tracker, which has seen the walk so far, expects the agent now."""
 
     position: np.ndarray
     t: float
     radius: float | None = None
+    predicted: np.ndarray | None = None
+    ellipse: tuple[float, float, float] | None = None
 
 
 @dataclass
@@ -147,7 +157,7 @@ class Display:
         self.screen = Screen()
         self._region_shown: list = []
         self._region_local: list[np.ndarray] = []
-        self._places: dict[str, tuple[tuple[float, float], np.ndarray]] = {}
+        self._places: dict[tuple[str, str], tuple[tuple[float, float], np.ndarray]] = {}
 
     def show(self, guidance: Guidance, now: float) -> None:
         """Put ``guidance`` on the screen at ``now`` (an older one than shown is ignored)."""
@@ -167,17 +177,23 @@ class Display:
         for r in guidance.reports:
             old = s.reports.get(r.agent)
             if old is None or r.t >= old.t:
-                s.reports[r.agent] = Sighting(self._place(r.agent, r.lat, r.lon), r.t, r.radius)
+                where = self._place(r.agent, "fix", r.lon, r.lat)
+                predicted = None if r.predicted is None else self._place(r.agent, "predicted", *r.predicted)
+                ellipse = None if r.ellipse is None else (r.ellipse[0], r.ellipse[1], math.radians(r.ellipse[2]))
+                s.reports[r.agent] = Sighting(where, r.t, r.radius, predicted, ellipse)
 
-    def _place(self, agent: str, lat: float, lon: float) -> np.ndarray:
-        """Where a report at ``(lat, lon)`` puts ``agent``, in map metres. Each
-        fix comes back in every guidance until the next, ten times a second:
-        it is converted once (and the array is read-only, as it is shared)."""
-        held = self._places.get(agent)
-        if held is None or held[0] != (lat, lon):
-            position = np.array(self.map.to_local(lat, lon))
-            position.flags.writeable = False
-            held = self._places[agent] = ((lat, lon), position)
+    def _place(self, agent: str, what: str, lon: float, lat: float) -> np.ndarray:
+        """Where ``agent``'s ``what`` (its fix, or its tracker's prediction)
+        at ``(lon, lat)`` is, in map metres. A report comes back in every
+        guidance, ten times a second: its fix is the same until the next
+        one, its prediction the same while the tracker expects no move. So
+        each point is converted once per change, and the array is read-only,
+        as the sightings share it."""
+        held = self._places.get((agent, what))
+        if held is None or held[0] != (lon, lat):
+            place = np.array(self.map.to_local(lat, lon))
+            place.flags.writeable = False
+            held = self._places[(agent, what)] = ((lon, lat), place)
         return held[1]
 
     def _to_local(self, points) -> np.ndarray:
