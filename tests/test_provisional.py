@@ -30,6 +30,9 @@ stages = "return"
 grid = {grid}
 {provisional}
 
+[guidance]
+uncertainty = "none"  # answers at the fixes themselves, compared exactly across the sets
+
 [[agent]]
 id = "attacker"
 team = "attacker"
