@@ -11,6 +11,7 @@ in one sentence."""
 
 import asyncio
 import json
+import math
 import os
 import random
 import signal
@@ -511,10 +512,12 @@ def test_a_person_at_a_terminal_drives_a_keyboard_walker(tmp_path, env):
     x2, y2 = where(t_north - 0.1)
     x3, y3 = where(t_end)
     # East at about 3 m/s for 2.5 s less the reaction time, within the
-    # heading error a person has (10 degrees, wandering); stopped; north.
-    assert x1 - x0 > 4.0 and abs(y1 - y0) < 0.4 * (x1 - x0)
+    # heading error a person has (10 degrees, wandering: three of them bound
+    # a stretch but once in a few hundred); stopped; north.
+    off = math.tan(math.radians(3 * 10.0))
+    assert x1 - x0 > 4.0 and abs(y1 - y0) < off * (x1 - x0)
     assert abs(x2 - xs) < 0.3 and abs(y2 - ys) < 0.3
-    assert y3 - y2 > 4.0 and abs(x3 - x2) < 0.4 * (y3 - y2)
+    assert y3 - y2 > 4.0 and abs(x3 - x2) < off * (y3 - y2)
 
 
 @pytest.mark.slow  # solves the fake-out's 45^4 game unless an earlier test did
