@@ -323,6 +323,23 @@ def test_the_checker_names_a_link_a_kernel_run_left_in_the_host_and_not_a_later_
     assert network(link="bcat-none", ifindex=lo, route="198.19.255.0/24").held is True
 
 
+def test_the_checker_takes_no_failsafe_from_before_the_uav_lost_its_ground_station(bearcat_simulate):
+    """A failsafe the UAV applied before its ground station was gone (on a
+    slow start, in an earlier gap) is no answer to the loss that came after."""
+    run = bearcat_simulate(
+        "search", [{"kind": "kill", "target": "gs", "at": 6.0}], scenario__time_limit=12.0, rules__grid=35
+    )
+    assert run.held("failsafe") is True
+    log = run.directory / "events.jsonl"
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    for e in events:
+        if e["event"] == "did" and "failsafe" in e["what"]:
+            e["t"] = e["at"] = 2.0
+    log.write_text("".join(json.dumps(e) + "\n" for e in events))
+    failsafe = {f.name: f for f in check_run(run.directory)}["failsafe"]
+    assert failsafe.held is False and failsafe.evidence == "UAV q1 lost its ground station at 6.0 s and did nothing"
+
+
 def test_a_second_run_into_the_same_directory_gets_its_own(tmp_path):
     path = tmp_path / "game.toml"
     path.write_text(scenario_text(time_limit=3.0))

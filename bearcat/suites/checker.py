@@ -17,7 +17,7 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   lease and ``SLACK`` s, and the peer back within ``REJOIN`` s of its end;
   a player cut off gets guidance again within ``REJOIN`` s of the heal;
 - ``failsafe``: a UAV whose ground station vanished applied its failsafe
-  within its ``link_timeout``;
+  within its ``link_timeout`` after it vanished;
 - ``leftovers``: no process the run started still runs, and a kernel run
   left neither its link nor its route in the host's namespace. The run
   names its own (``runtime.processes``, ``endpoint.json``): a process is
@@ -314,8 +314,12 @@ def _failsafe(run: Run) -> Finding:
         lost = _first_ground_loss(run, uav.id)
         if lost is None:
             continue
-        acted = next(
-            (e for e in run.records() if e["event"] == "did" and e["agent"] == uav.id and "failsafe" in e["what"]),
+        acted = next(  # a failsafe applied before the loss (a slow start, an earlier gap) answers another
+            (
+                e
+                for e in run.records()
+                if e["event"] == "did" and e["agent"] == uav.id and "failsafe" in e["what"] and e["at"] >= lost
+            ),
             None,
         )
         if acted is None or acted["at"] - lost > uav.link_timeout + 0.5:
