@@ -11,12 +11,14 @@ from __future__ import annotations
 
 import json
 from dataclasses import asdict
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 from bearcat.agents.ground_station.event_log import read_events
 from bearcat.cli.main import main
+from bearcat.runtime import processes
 from bearcat.runtime.run_directory import fresh, write_scenario
 from bearcat.runtime.simulate import simulate
 from bearcat.scenarios.faults import FaultError, load_faults, parse_faults
@@ -303,15 +305,39 @@ def test_the_checker_catches_a_torn_log_a_lost_message_and_a_verdict_the_truth_d
     assert {f.name: f.held for f in check_run(run)}["verdict"] is False
 
 
-def test_the_checker_names_a_link_a_kernel_run_left_in_the_host(tmp_path):
+def test_the_checker_names_a_link_a_kernel_run_left_in_the_host_and_not_a_later_one_of_its_name(tmp_path):
     play(tmp_path, [])
     run = tmp_path / "run"
-    (run / "peers").mkdir()  # as a live run's directory
-    (run / "endpoint.json").write_text(json.dumps({"network": {"link": "lo", "route": None}}))
-    leftovers = {f.name: f for f in check_run(run)}["leftovers"]
+    (run / "peers").mkdir()  # as a live run's directory, which started no process
+    processes.begin(run)
+    lo = int(Path("/sys/class/net/lo/ifindex").read_text())
+
+    def network(**added):
+        (run / "endpoint.json").write_text(json.dumps({"network": added}))
+        return {f.name: f for f in check_run(run)}["leftovers"]
+
+    leftovers = network(link="lo", ifindex=lo, route=None)
     assert leftovers.held is False and leftovers.evidence == "left behind: link lo"
-    (run / "endpoint.json").write_text(json.dumps({"network": {"link": "bcat-none", "route": "198.19.255.0/24"}}))
-    assert {f.name: f for f in check_run(run)}["leftovers"].held is True
+    # A link of the run's name, but not the run's: the next kernel run takes the name of the last.
+    assert network(link="lo", ifindex=lo + 1000, route=None).held is True
+    assert network(link="bcat-none", ifindex=lo, route="198.19.255.0/24").held is True
+
+
+def test_the_checker_takes_no_failsafe_from_before_the_uav_lost_its_ground_station(bearcat_simulate):
+    """A failsafe the UAV applied before its ground station was gone (on a
+    slow start, in an earlier gap) is no answer to the loss that came after."""
+    run = bearcat_simulate(
+        "search", [{"kind": "kill", "target": "gs", "at": 6.0}], scenario__time_limit=12.0, rules__grid=35
+    )
+    assert run.held("failsafe") is True
+    log = run.directory / "events.jsonl"
+    events = [json.loads(line) for line in log.read_text().splitlines()]
+    for e in events:
+        if e["event"] == "did" and "failsafe" in e["what"]:
+            e["t"] = e["at"] = 2.0
+    log.write_text("".join(json.dumps(e) + "\n" for e in events))
+    failsafe = {f.name: f for f in check_run(run.directory)}["failsafe"]
+    assert failsafe.held is False and failsafe.evidence == "UAV q1 lost its ground station at 6.0 s and did nothing"
 
 
 def test_a_second_run_into_the_same_directory_gets_its_own(tmp_path):

@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from bearcat.netem.kernel.network import KernelNetwork, missing
+from bearcat.suites.checker import check_run
 
 needs_kernel = pytest.mark.skipif(missing() is not None, reason=str(missing()))
 # One worker of a parallel session runs these in turn: they look for what
@@ -150,6 +151,11 @@ def test_a_launcher_killed_with_sigkill_leaves_nothing_behind(tmp_path):
     wait_for_the_start(launcher)
     added = added_by(tmp_path)
     assert leftovers(added)["interfaces"], "the run's link to its hub is up while it plays"
+    # While it plays, the checker counts what the run started: its peers, its hub, its link.
+    playing = next(f for f in check_run(tmp_path / "run") if f.name == "leftovers")
+    assert playing.held is False, playing.evidence
+    assert all(f"{name} (pid " in playing.evidence for name in ("gs", "attacker", "defender", "hub")), playing.evidence
+    assert playing.evidence.endswith(f"link {added['link']}, route {added['route']}"), playing.evidence
     os.kill(launcher.pid, signal.SIGKILL)
     launcher.wait(timeout=10)
     # Nobody is left to delete the link: it goes when the kernel tears the
@@ -159,6 +165,7 @@ def test_a_launcher_killed_with_sigkill_leaves_nothing_behind(tmp_path):
         time.sleep(0.1)
     assert peers_of(tmp_path) == []
     assert leftovers(added) == NOTHING
+    assert next(f for f in check_run(tmp_path / "run") if f.name == "leftovers").held is True
 
 
 @needs_kernel

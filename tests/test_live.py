@@ -32,6 +32,7 @@ from bearcat.bus.codec import decode, encode
 from bearcat.bus.messages import Fix, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.netem.profiles import load_profile
+from bearcat.runtime import processes
 from bearcat.runtime.launch import agent_failures, free_port
 from bearcat.runtime.live import run_peer
 from bearcat.scenarios.cast import build_cast
@@ -296,16 +297,24 @@ def test_ctrl_c_stops_every_peer(tmp_path):
 def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path):
     """A launcher that cannot clean up (SIGKILL) still takes its peers with it:
     each is started with the parent-death signal."""
+    from bearcat.suites.checker import check_run
+
     launcher, out, path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         assert len(peers_of(path)) == 3
+        assert sorted(p.pid for p in processes.recorded(out) if processes.running(p)) == sorted(peers_of(path))
         launcher.kill()
         launcher.communicate(timeout=10)
     finally:
         if launcher.poll() is None:
             launcher.kill()
     assert wait_for(lambda: peers_of(path) == [], 10)
+    # What the launcher recorded outlives it: the checker knows the run's
+    # processes, and finds none left once they have finished dying (a killed
+    # process drops its command line before it exits).
+    assert sorted(p.name for p in processes.recorded(out)) == ["attacker", "defender", "gs"]
+    assert wait_for(lambda: {f.name: f.held for f in check_run(out)}["leftovers"] is True, 10)
 
 
 def test_a_walker_whose_ground_station_is_gone_for_a_lease_stops_by_itself_saying_why(tmp_path, env):

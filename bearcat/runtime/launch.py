@@ -23,7 +23,9 @@ The launcher's own session records every message of the game it sees into
 network shim did to the messages it received and its agents' failures into
 ``peers/NAME.jsonl`` (the ground station's guidance without its body, which
 ``events.jsonl`` holds: ``live.BODILESS``), and its log into ``peers/NAME.log``. The outcome counts
-the failures of each agent from those logs.
+the failures of each agent from those logs. Each process the launcher
+starts is recorded in ``processes.jsonl`` as it starts (``processes``), so
+the run checker knows which processes were the run's.
 
 A fault plan is kept in the run directory (``faults.toml``), handed to every
 peer, and applied by the launcher as the game goes (``live_faults``): a
@@ -56,6 +58,7 @@ from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
+from bearcat.runtime import processes
 from bearcat.runtime.credentials import covering, members, run_authority
 from bearcat.runtime.dispatch import FAILED
 from bearcat.runtime.live_faults import LiveFaults
@@ -281,6 +284,7 @@ def _play(
     out.mkdir(parents=True, exist_ok=True)
     (out / "peers").mkdir(exist_ok=True)
     write_scenario(out, scenario)
+    processes.begin(out)
     run_flags: tuple[str, ...] = ("--secure",) if secure else ()
     if plan:
         write_faults(out / "faults.toml", plan)
@@ -312,6 +316,8 @@ def _play(
         ) as session,
         closing(EventLog(out / "events.jsonl")) as record,
     ):
+        for name, pid in places.own_processes().items():
+            processes.record(out, name, pid)
         say(places.describe(netem))
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
         where = {"endpoint": endpoint, "game": scenario.name, "certs": str(certs), "network": places.host_side()}
@@ -391,7 +397,9 @@ def _play(
                     extra = (*extra, "--resume")
                 # The ground station and the phones' bridges stay on the laptop: a real phone's network is real.
                 colocated = role in ("ground-station", "phone")
-                return places.start(name, command(role, name, *extra), log, colocated=colocated, again=again)
+                peer = places.start(name, command(role, name, *extra), log, colocated=colocated, again=again)
+                processes.record(out, name, peer.pid)
+                return peer
 
             how[GROUND] = (
                 "ground-station",
@@ -412,6 +420,7 @@ def _play(
                 children[vehicle] = places.start_vehicle(
                     flyer, vehicle_command(scenario, k, port), out / "peers" / f"{vehicle}.log"
                 )
+                processes.record(out, vehicle, children[vehicle].pid)
             guarded = ["--secure"] if secure else []
             for agent in (a for a in scenario.agents if a.id in by_hand):
                 walker = peer_command("walker", scenario_ref, agent.id, endpoint, seed, netem, out, certs, transport)

@@ -73,6 +73,10 @@ class LocalPeers:
         """What the run adds to the host's network while it runs (None: nothing)."""
         return None
 
+    def own_processes(self) -> dict[str, int]:
+        """The processes the network itself runs for the run, by name: their numbers."""
+        return {}
+
 
 class KernelPeers(LocalPeers):
     """Peers in namespaces behind a kernel network impairing packets with profile ``netem``."""
@@ -126,6 +130,10 @@ class KernelPeers(LocalPeers):
 
     def host_side(self) -> dict | None:
         return self.network.host_side
+
+    def own_processes(self) -> dict[str, int]:
+        assert self.network.hub is not None, "the hub runs once the network is entered"
+        return {"hub": self.network.hub.pid}
 
 
 def _child(command: list[str], log: Path, again: bool = False) -> subprocess.Popen:

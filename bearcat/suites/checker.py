@@ -17,10 +17,15 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   lease and ``SLACK`` s, and the peer back within ``REJOIN`` s of its end;
   a player cut off gets guidance again within ``REJOIN`` s of the heal;
 - ``failsafe``: a UAV whose ground station vanished applied its failsafe
-  within its ``link_timeout``;
-- ``leftovers``: no process still runs from the run, and a kernel run left
-  neither its link nor its route in the host's namespace (a run that starts
-  right after may take the same names: check a run when it ends).
+  within its ``link_timeout`` after it vanished;
+- ``leftovers``: no process the run started still runs, and a kernel run
+  left neither its link nor its route in the host's namespace. The run
+  names its own (``runtime.processes``, ``endpoint.json``): a process is
+  its number and start time, a link its name and interface number, so
+  neither a script that wraps the checker nor a later run's process, link
+  or route of the same number or name is counted. A run that recorded no
+  processes (from before runs did), or whose processes ran under another
+  boot or PID namespace than the checker's, cannot be judged here.
 """
 
 from __future__ import annotations
@@ -28,7 +33,6 @@ from __future__ import annotations
 import itertools
 import json
 import math
-import os
 import subprocess
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,6 +43,7 @@ import shapely
 
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
+from bearcat.runtime import processes
 from bearcat.runtime.run_directory import SCENARIO
 from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER
 
@@ -309,8 +314,12 @@ def _failsafe(run: Run) -> Finding:
         lost = _first_ground_loss(run, uav.id)
         if lost is None:
             continue
-        acted = next(
-            (e for e in run.records() if e["event"] == "did" and e["agent"] == uav.id and "failsafe" in e["what"]),
+        acted = next(  # a failsafe applied before the loss (a slow start, an earlier gap) answers another
+            (
+                e
+                for e in run.records()
+                if e["event"] == "did" and e["agent"] == uav.id and "failsafe" in e["what"] and e["at"] >= lost
+            ),
             None,
         )
         if acted is None or acted["at"] - lost > uav.link_timeout + 0.5:
@@ -324,15 +333,25 @@ def _failsafe(run: Run) -> Finding:
 def _leftovers(run: Run) -> Finding:
     if not run.live:
         return Finding("leftovers", None, "a simulated run starts no process")
-    mine = str(run.directory.resolve())
-    left = []
-    for pid in filter(str.isdigit, os.listdir("/proc")):
-        try:
-            cmdline = Path(f"/proc/{pid}/cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        if mine in cmdline and int(pid) != os.getpid():
-            left.append(f"{pid} ({cmdline[:60].strip()})")
+    try:
+        started = processes.recorded(run.directory)
+    except ValueError as exc:
+        return Finding("leftovers", None, f"cannot tell: {exc}")
+    if started is None:
+        return Finding(
+            "leftovers",
+            None,
+            f"cannot tell: this run recorded no processes (it has no {processes.PROCESSES}: "
+            "a run from before runs recorded them)",
+        )
+    if any(p.host != processes.host() for p in started):
+        return Finding(
+            "leftovers",
+            None,
+            "cannot tell: the run's processes ran under another boot or PID namespace than this check's "
+            "(another machine, a restart, a container)",
+        )
+    left = [f"{p.name} (pid {p.pid})" for p in started if processes.running(p)]
     left += _network_left(run)
     if left:
         return Finding("leftovers", False, f"left behind: {', '.join(left)}")
@@ -343,18 +362,24 @@ def _leftovers(run: Run) -> Finding:
 
 def _network_left(run: Run) -> list[str]:
     """The link and route a kernel run added to the host (``endpoint.json``), if still there.
-    The run's namespaces, and the packet rules inside them, end with their
-    last process: a process left is what would keep them."""
+    A link is the run's while it has the interface number the run recorded
+    (the next run takes the same name), and its route goes with it. The
+    run's namespaces, and the packet rules inside them, end with their last
+    process: a process left is what would keep them."""
     try:
         added = json.loads((run.directory / "endpoint.json").read_text()).get("network") or {}
     except (FileNotFoundError, json.JSONDecodeError):
         return []
-    left = []
-    if added.get("link") and Path(f"/sys/class/net/{added['link']}").exists():
-        left.append(f"link {added['link']}")
+    link = added.get("link")
+    try:
+        if link is None or int(Path(f"/sys/class/net/{link}/ifindex").read_text()) != added.get("ifindex"):
+            return []
+    except OSError:
+        return []
+    left = [f"link {link}"]
     if added.get("route"):
         routes = subprocess.run(["ip", "-j", "-4", "route"], capture_output=True, text=True).stdout or "[]"
-        if any(r.get("dst") == added["route"] for r in json.loads(routes)):
+        if any(r.get("dst") == added["route"] and r.get("dev") == link for r in json.loads(routes)):
             left.append(f"route {added['route']}")
     return left
 

@@ -102,6 +102,7 @@ class KernelNetwork:
         self._links = 0
         self._subnet: ipaddress.IPv4Network | None = None
         self._veth: str | None = None  # the host's end of the link to the hub
+        self._ifindex: int | None = None  # its number, which no later link of the same name shares
         # Each peer's namespace held open until the end: a peer that exits
         # would otherwise take its end of the link with it, and the router's
         # goodbye over a delayed link would wait for an answer that never comes.
@@ -124,9 +125,15 @@ class KernelNetwork:
     @property
     def host_side(self) -> dict:
         """What this network adds to the host's own namespace while it runs:
-        the link to the hub and the route through it (all else is inside the
-        namespaces and goes with them)."""
-        return {"link": self._veth, "route": None if self._subnet is None else str(self._subnet)}
+        the link to the hub (its name, which the next network takes once this
+        one is gone, and its interface number, which no later link shares)
+        and the route through it (all else is inside the namespaces and goes
+        with them)."""
+        return {
+            "link": self._veth,
+            "ifindex": self._ifindex,
+            "route": None if self._subnet is None else str(self._subnet),
+        }
 
     def describe(self) -> str:
         """Which machinery impairs the packets, and why not netem where the kernel has it."""
@@ -276,6 +283,7 @@ class KernelNetwork:
             veth = f"bcat{list(BLOCK.subnets(new_prefix=24)).index(self._subnet)}"
             self._veth = veth
             run("ip", "link", "add", veth, "type", "veth", "peer", "name", "up0", "netns", str(self.hub.pid))
+            self._ifindex = int(Path(f"/sys/class/net/{veth}/ifindex").read_text())
             run("ip", "addr", "add", f"{host}/30", "dev", veth)
             run("ip", "link", "set", veth, "up")
             inside(self.hub.pid, "ip", "addr", "add", f"{hub}/30", "dev", "up0")
