@@ -49,17 +49,17 @@ for k in range(count):
 
 def leftovers(added: dict) -> dict:
     """What of ``added`` (a kernel network's ``host_side``: its link and its
-    route) is still in this host's namespace."""
-    links = [
-        link["ifname"]
-        for link in json.loads(subprocess.run(["ip", "-j", "link"], capture_output=True, text=True).stdout)
-    ]
+    route) is still in this host's namespace. The link is known by its
+    interface number: a kernel run in another test worker takes the same
+    name and subnet as soon as this one's are free."""
+    links = json.loads(subprocess.run(["ip", "-j", "link"], capture_output=True, text=True).stdout)
+    mine = [link["ifname"] for link in links if (link["ifname"], link["ifindex"]) == (added["link"], added["ifindex"])]
     routes = json.loads(subprocess.run(["ip", "-j", "-4", "route"], capture_output=True, text=True).stdout)
     subnet = ipaddress.ip_network(added["route"])
-    inside = [r["dst"] for r in routes if r.get("dst", "default") != "default"]
+    through = [r["dst"] for r in routes if r.get("dev") in mine and r.get("dst", "default") != "default"]
     return {
-        "interfaces": [name for name in links if name == added["link"]],
-        "routes": [dst for dst in inside if ipaddress.ip_network(dst, strict=False).subnet_of(subnet)],
+        "interfaces": mine,
+        "routes": [dst for dst in through if ipaddress.ip_network(dst, strict=False).subnet_of(subnet)],
     }
 
 
