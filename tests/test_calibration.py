@@ -6,6 +6,7 @@ import math
 import os
 import subprocess
 import sys
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,6 +21,7 @@ from bearcat.agents.ground_station.calibration import (
     fit,
 )
 from bearcat.agents.ground_station.event_log import read_events
+from bearcat.maps.geodesy import bearing
 from tests.support.scenario_files import write_scenario
 
 # --- the margins: split-conformal quantiles per phase and report age ---
@@ -140,6 +142,59 @@ def test_a_quantile_heading_is_never_worse_than_the_plain_one_at_its_own_quantil
     assert one.value == pytest.approx(field_game.evaluate(attackers[0], defenders[0], "return").value)
 
 
+def test_ablations_switch_off_the_calibration_and_the_defenders_belief(field_game):
+    """``guidance.ablate``: with ``calibration`` the go's margin is the
+    tracker's own even though a calibration is there, and the note says it
+    was switched off; with ``belief`` the defender steers by the plain
+    heading at the prediction and its value is the plain one there."""
+    from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor, Estimate, _standing
+    from bearcat.maps import load_map
+
+    game_map = load_map("field-50")
+    scores = [replace(s, phase="return") for s in _scores(200, 40, np.random.default_rng(10), scale=lambda age: 3.0)]
+    calibration = fit(scores, 0.05)
+    a, d = np.array([25.0, 22.0]), np.array([25.0, 34.0])
+    estimate = Estimate(0.0, _standing(a, 2.0), _standing(d, 2.0), 0.2)
+
+    def advisor(*ablate):
+        methods = {"attacker": "calibrated", "defender": "calibrated"}
+        return CtfAdvisor(
+            game_map, field_game, attacker="attacker", defender="defender", phase="return", methods=methods,
+            calibration=None if "calibration" in ablate else calibration, alpha=0.05, ablate=ablate,
+        )  # fmt: skip
+
+    full, uncalibrated = advisor().calibrated_answer("attacker", estimate), advisor("calibration")
+    assert full["margin"] == pytest.approx(calibration.margin("return", 0.2), abs=1e-3) and full["note"] == ""
+    own = uncalibrated.calibrated_answer("attacker", estimate)
+    assert "switched off" in own["note"] and own["margin"] != full["margin"]
+    plain = field_game.evaluate(a, d, "return")
+    sampled = advisor().calibrated_answer("defender", estimate)
+    believed = advisor("belief").calibrated_answer("defender", estimate)
+    assert believed["value"] == pytest.approx(plain.value)
+    assert believed["heading"] == pytest.approx(bearing(*plain.defender_heading))
+    assert sampled["value"] < plain.value  # the median over a 2 m wide belief, against the value at its centre
+
+
+def test_a_calibration_is_keyed_by_the_trackers_ablations_only():
+    """Switching off a tracker's part changes what a calibration scores, so
+    it has a calibration of its own; switching off the calibration or the
+    defender's belief does not, and neither does the order of the parts."""
+    from bearcat.agents.ground_station.calibration_store import calibrate_command, calibration_key
+    from bearcat.netem.profiles import load_profile
+    from bearcat.scenarios.cast import ctf_of
+    from bearcat.scenarios.schema import load_scenario
+
+    game, profile = ctf_of(load_scenario("go-no-go")).own(), load_profile("3g")
+    full = calibration_key(game, profile, 0.01)
+    assert calibration_key(game, profile, 0.01, ("calibration", "belief")) == full
+    bias = calibration_key(game, profile, 0.01, ("bias",))
+    assert bias != full and bias != calibration_key(game, profile, 0.01, ("prediction",))
+    both = calibration_key(game, profile, 0.01, ("prediction", "bias"))
+    assert both == calibration_key(game, profile, 0.01, ("bias", "prediction", "belief"))
+    command = calibrate_command("go-no-go", "3g", ("belief", "bias"))
+    assert command == "bearcat calibrate go-no-go --netem 3g --ablate bias"
+
+
 # --- games: calibrated guidance live in simulation, its replay, the command ---
 
 
@@ -209,6 +264,12 @@ def test_calibrate_fits_checks_and_stores_a_calibration_the_ground_station_then_
     # Resumed: nothing is played again.
     again = _bearcat(*words, "--workers", "1", "--out", str(out), "--json")
     assert again.returncode == 0 and json.loads(again.stdout) == rows
+    # Trackers with a part switched off get a calibration of their own, beside the full one.
+    ablated = _bearcat(*words[:3], "4", "--holdout", "2", *words[6:], "--ablate", "bias", "--out", str(tmp_path / "b"))
+    assert ablated.returncode == 0, ablated.stderr
+    alone = load_calibration(ctf_of(scenario).own(), profile, 0.1, ("bias",))
+    assert alone is not None and alone.about["ablate"] == ["bias"] and alone.about["fit_seeds"] == [500, 503]
+    assert load_calibration(ctf_of(scenario).own(), profile, 0.1).about["fit_seeds"] == [500, 511]
     # The ground station answers from it: each go is the value plus that calibration's margin.
     from bearcat.scenarios.variants import vary
 

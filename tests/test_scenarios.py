@@ -1,6 +1,7 @@
 """Scenario files: the built-in ones load, and every mistake is one sentence
 naming the file and the key."""
 
+import json
 import re
 
 import pytest
@@ -179,6 +180,7 @@ def test_an_unknown_scenario_is_named(tmp_path):
 
 
 def test_study_summaries_count_goes_false_goes_and_real_windows():
+    from bearcat.scenarios.variants import vary
     from bearcat.studies.thesis import study_tasks, summarise
 
     rows = [
@@ -196,6 +198,19 @@ def test_study_summaries_count_goes_false_goes_and_real_windows():
     calibrated = study_tasks("go-no-go", 3, 10, ["3g"], guidance=["calibrated"])
     assert [t["labels"]["guidance"] for t in calibrated] == ["calibrated"] * 3
     assert {t["key"] for t in calibrated} < {t["key"] for t in tasks}
+    # Ablations are played only when asked for by name, each switching off its part.
+    assert not any("ablate" in json.dumps(t["changes"]) for t in tasks)
+    (ablated,) = study_tasks("go-no-go", 1, 10, ["3g"], guidance=["calibrated, no bias"])
+    assert vary(load_scenario("go-no-go"), ablated["changes"]).ablate == ("bias",)
+
+
+def test_a_study_refuses_guidance_it_does_not_vary_in_one_sentence(capsys):
+    from bearcat.cli.main import main
+
+    assert main(["study", "go-no-go", "--guidance", "calibrated, no belief", "--trials", "1"]) == 2
+    said = capsys.readouterr().err.strip().splitlines()[-1]
+    assert "--guidance 'calibrated, no belief': the go-no-go study has no such cells" in said
+    assert "'calibrated, no calibration'" in said
 
 
 def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():
@@ -246,6 +261,7 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
         ({"agent.defender.robust": True}, "agent[1].robust: was replaced by agent[1].uncertainty"),
         ({"agent.defender.reaction": -1.0}, "agent[1].reaction"),
         ({"guidance.confidence": 1.0}, "guidance.confidence"),
+        ({"guidance.ablate": ["hindsight"]}, "guidance.ablate[0]"),
     ],
 )
 def test_a_bad_change_is_refused_in_one_sentence_naming_the_key(changes, message):

@@ -349,3 +349,73 @@ def test_a_feint_widens_the_prediction_at_once_and_it_tightens_after():
     assert manoeuvre[settled].max() < 0.2
     assert spread[settled].mean() < 1.05 * spread[before].mean()
     assert speed_spread[settled].mean() < 1.2 * speed_spread[before].mean()
+
+
+# ---------------------------------------------------------------- ablations (guidance.ablate)
+
+
+def test_without_prediction_each_belief_stays_at_its_players_latest_fix():
+    walk = simulate(5, duration=10.0, speed=2.5)
+    gps, compass = load_profile("wifi").gps, load_profile("wifi").compass
+    to_now, at_fix = Trackers(FIELD, gps, compass), Trackers(FIELD, gps, compass, to_now=False)
+    for _, fix in walk.fixes:
+        to_now.take(fix)
+        at_fix.take(fix)
+    last = max(f.t for _, f in walk.fixes)
+    later = last + 2.0
+    held = at_fix.predict(later)["a"]
+    assert held.t == last
+    np.testing.assert_array_equal(held.position, to_now.predict(last)["a"].position)
+    moved = to_now.predict(later)["a"]
+    assert moved.t == later
+    np.testing.assert_allclose(moved.position, held.position + 2.0 * held.velocity, atol=1e-9)
+
+
+def test_walking_only_never_manoeuvres_and_a_feint_outruns_its_prediction():
+    """One mode: the feint's turn leaves the manoeuvre probability at 0, and
+    in the two fixes after the turn the walking-only prediction is further
+    from the truth than the full model's, which widens and turns faster."""
+    turn = 20.0
+    legs = [(0.0, (math.sin(math.radians(80.0)), math.cos(math.radians(80.0)))), (turn, (-1.0, -0.2))]
+    errors = {"full": [], "walking only": []}
+    for seed in range(8):
+        walk = simulate(40 + seed, duration=26.0, speed=3.0, legs=legs)
+        p = load_profile("wifi")
+        trackers = {
+            "full": Tracker(p.gps, p.compass, Motion.of(3.0)),
+            "walking only": Tracker(p.gps, p.compass, Motion.of(3.0).walking_only()),
+        }
+        for _, fix in walk.fixes:
+            for name, tracker in trackers.items():
+                tracker.take(fix, FIELD)
+                if turn + 0.4 < fix.t <= turn + 2.5:
+                    belief = tracker.predict(fix.t + 0.5)
+                    k = round((fix.t + 0.5) / TICK) - 1
+                    errors[name].append(np.sum((belief.position - walk.positions[k]) ** 2))
+                    if name == "walking only":
+                        assert belief.manoeuvre == 0.0
+    full, walking = (math.sqrt(np.mean(errors[n])) for n in ("full", "walking only"))
+    print(f"after the turn: RMSE {full:.2f} m with the manoeuvre mode, {walking:.2f} m walking only")
+    assert full < walking
+
+
+def test_without_the_bias_state_the_tracker_is_overconfident():
+    """The same GPS error taken for white noise (``GpsError.as_white``):
+    averaging fixes seems to shrink an error that is in fact a slowly
+    drifting bias, so the NEES over the same walks lies above the band the
+    full tracker stays in."""
+    p = load_profile("3g")
+    white = p.gps.as_white()
+    assert white.bias_sigma == 0.0 and white.horizontal_sigma() == pytest.approx(p.gps.horizontal_sigma())
+    runs, nees = 20, []
+    for run in range(runs):
+        walk = simulate(100 + run, "3g", duration=40.0, speed=2.5)
+        tracker = Tracker(white, p.compass, Motion.of(2.5))
+        beliefs = {k: b for k, b, _ in follow(walk, tracker, every=1)}
+        for t in np.arange(10.0, 40.0 + 1e-9, 5.0):
+            k = round(t / TICK) - 1
+            d = beliefs[k].position - walk.positions[k]
+            nees.append(d @ np.linalg.solve(beliefs[k].position_covariance, d))
+    high = chi2.ppf(0.975, 2 * runs) / runs
+    print(f"NEES without the bias state {np.mean(nees):.2f}, the band's top {high:.2f}")
+    assert np.mean(nees) > high

@@ -22,6 +22,7 @@ from bearcat.cli.writing import make_directory, writing
 
 
 def register(commands: Commands) -> None:
+    from bearcat.scenarios.schema import TRACKER_ABLATIONS
     from bearcat.studies.calibration import CALIBRATION_SEED
 
     p = commands.add_parser(
@@ -41,6 +42,15 @@ def register(commands: Commands) -> None:
         metavar="S",
         help=f"seed of the first game (default {CALIBRATION_SEED}, apart from every study's seeds); "
         "the check plays the seeds after the fit's",
+    )
+    p.add_argument(
+        "--ablate",
+        action="append",
+        default=[],
+        choices=TRACKER_ABLATIONS,
+        metavar="PART",
+        help="calibrate trackers with this part switched off, for a study's guidance.ablate (repeatable): "
+        + ", ".join(TRACKER_ABLATIONS),
     )
     p.add_argument(
         "--alpha",
@@ -66,10 +76,12 @@ def run(args) -> int:
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import ctf_of
     from bearcat.scenarios.schema import load_scenario
+    from bearcat.scenarios.variants import vary
     from bearcat.studies.batch import run_batch
     from bearcat.studies.calibration import calibration_tasks, play_calibration_task, scores_of
 
-    scenario = load_scenario(args.scenario)
+    ablate = sorted(set(args.ablate))
+    scenario = vary(load_scenario(args.scenario), {"guidance.ablate": ablate} if ablate else {})
     if scenario.game != "ctf":
         raise arguments.UsageError(
             f"{scenario.source}: calibrated guidance is for capture-the-flag, not {scenario.game}"
@@ -80,10 +92,10 @@ def run(args) -> int:
         raise arguments.UsageError(f"--alpha must lie in (0, 0.5], got {alpha:g}")
     arguments.check_seeds(args.seed, args.trials + args.holdout)
     report = Output(args.json)
-    out = args.out or Path("calibrations") / f"{scenario.name}-{profile.name}"
+    out = args.out or Path("calibrations") / "-".join([scenario.name, profile.name, *(f"no-{a}" for a in ablate)])
     make_directory(out, "results directory")
-    fitted = calibration_tasks(args.scenario, profile.name, args.seed, args.trials, "fit")
-    checked = calibration_tasks(args.scenario, profile.name, args.seed + args.trials, args.holdout, "check")
+    fitted = calibration_tasks(args.scenario, profile.name, args.seed, args.trials, "fit", ablate)
+    checked = calibration_tasks(args.scenario, profile.name, args.seed + args.trials, args.holdout, "check", ablate)
     if args.cluster is None:
         from bearcat.cli.presolve import presolve
 
@@ -105,6 +117,7 @@ def run(args) -> int:
             "scenario": scenario.name,
             "map": scenario.map.name,
             "profile": profile.name,
+            "ablate": ablate,
             "fit_seeds": [args.seed, args.seed + args.trials - 1],
             "check_seeds": [args.seed + args.trials, args.seed + args.trials + args.holdout - 1],
         }
@@ -113,7 +126,7 @@ def run(args) -> int:
         rows = [_row(c) for c in checks]
         (out / "calibration.json").write_text(json.dumps(calibration.to_json(), indent=1) + "\n")
         (out / "coverage.json").write_text(json.dumps(rows, indent=1) + "\n")
-        stored = store_calibration(calibration, game, profile)
+        stored = store_calibration(calibration, game, profile, scenario.ablate)
     report.say(_table(rows, alpha))
     report.say(
         f"{len(fit_scores)} answers of {args.trials} games fitted (seeds {about['fit_seeds'][0]}-"

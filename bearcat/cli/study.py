@@ -24,7 +24,7 @@ from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import make_directory, writing
 from bearcat.scenarios.schema import TRANSPORTS, Scenario
-from bearcat.studies.thesis import GUIDANCE, STUDIES
+from bearcat.studies.thesis import ABLATED, GUIDANCE, STUDIES
 
 
 def register(commands: Commands) -> None:
@@ -45,9 +45,10 @@ def register(commands: Commands) -> None:
     p.add_argument(
         "--guidance",
         nargs="+",
-        choices=tuple(GUIDANCE),
+        choices=(*GUIDANCE, *ABLATED),
         metavar="NAME",
-        help=f"play only the cells of this guidance: {', '.join(map(repr, GUIDANCE))} (default: every one)",
+        help=f"play only the cells of this guidance: {', '.join(map(repr, GUIDANCE))} (default: each of these), "
+        "or calibrated guidance with a part switched off: " + ", ".join(map(repr, ABLATED)),
     )
     arguments.add_batch_options(p, "games")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
@@ -78,6 +79,7 @@ def run(args) -> int:
     if args.human is not None and args.cluster is not None:
         raise arguments.UsageError("--human plays its games live on this machine; it takes no --cluster")
     arguments.check_seeds(args.seed, args.trials)
+    _check_guidance(args.study, args.guidance)
     report = Output(args.json)
     out = args.out or Path("studies") / args.study
     make_directory(out, "results directory")
@@ -117,6 +119,17 @@ def run(args) -> int:
     return 0
 
 
+def _check_guidance(study: str, guidance) -> None:
+    """Each guidance asked for is one ``study`` varies."""
+    from bearcat.studies.thesis import study_guidance
+
+    offered = study_guidance(study)
+    for name in guidance or ():
+        if name not in offered:
+            has = ", ".join(map(repr, offered)) or "none: it varies no guidance"
+            raise arguments.UsageError(f"--guidance {name!r}: the {study} study has no such cells; it has {has}")
+
+
 def _presolve(study) -> None:
     """Solve each scenario's game once here, with progress bars, so the
     local worker processes only load it. A cluster's workers have no use
@@ -134,25 +147,27 @@ def _presolve(study) -> None:
 def uncalibrated(tasks) -> list[str]:
     """A line for each scenario and profile whose calibrated attackers will
     have no calibration to answer from, naming the command that makes one."""
-    from bearcat.agents.ground_station.calibration_store import load_calibration
+    from bearcat.agents.ground_station.calibration_store import calibrate_command, load_calibration
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import ctf_of
-    from bearcat.scenarios.schema import load_scenario
+    from bearcat.scenarios.schema import TRACKER_ABLATIONS, load_scenario
     from bearcat.scenarios.variants import vary
 
     cells = {(t["scenario"], t["netem"], json.dumps(t.get("changes") or {}, sort_keys=True)) for t in tasks}
-    wanted: dict[tuple[str, str | None], Scenario] = {}
+    wanted: dict[tuple, Scenario] = {}
     for name, netem, changes in sorted(cells, key=str):
         scenario = vary(load_scenario(name), json.loads(changes))
-        if scenario.game == "ctf" and scenario.uncertainty_of(scenario.team("attacker")[0]) == "calibrated":
-            wanted.setdefault((name, netem), scenario)
+        calibrated = scenario.game == "ctf" and scenario.uncertainty_of(scenario.team("attacker")[0]) == "calibrated"
+        if calibrated and "calibration" not in scenario.ablate:
+            tracker = tuple(sorted(set(scenario.ablate) & set(TRACKER_ABLATIONS)))
+            wanted.setdefault((name, netem, tracker), scenario)
     lines = []
-    for (name, netem), scenario in wanted.items():
+    for (name, netem, _), scenario in wanted.items():
         profile = load_profile(netem or scenario.netem)
-        if load_calibration(ctf_of(scenario).own(), profile, scenario.alpha) is None:
+        if load_calibration(ctf_of(scenario).own(), profile, scenario.alpha, scenario.ablate) is None:
             lines.append(
                 f"no calibration of {name} on {profile.name}: its calibrated attackers take the tracker's own margin "
-                f"(bearcat calibrate {name} --netem {profile.name} makes one)"
+                f"({calibrate_command(name, profile.name, scenario.ablate)} makes one)"
             )
     return lines
 

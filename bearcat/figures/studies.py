@@ -92,7 +92,7 @@ def go_no_go_figure(rows):
 def fake_out_figure(rows):
     """One heatmap per report rate: the attacker's win rate against the
     unaided defender by marking distance (rows) and reaction time (columns),
-    the worst-case aided defender as the bottom row."""
+    the aided defenders (plain, worst-case, calibrated) as the bottom rows."""
     people = [r for r in rows if r["defender"] == "human"]
     rows = [r for r in rows if r["defender"] != "human"]
     rates = sorted({r["rate"] for r in rows}) or [None]
@@ -120,7 +120,7 @@ def fake_out_figure(rows):
         ax.set_title(f"phones report at {rate:g} Hz")
     if image is not None:
         fig.colorbar(image, ax=axes[0].tolist(), label="attacker wins (%)")
-    title = "the fake-out: attacker wins against the unaided defender, and the worst-case aided one"
+    title = "the fake-out: attacker wins against the unaided defender, and the aided ones"
     for r in people:
         low, high = (100 * v for v in r["attacker_win_interval"])
         title += (

@@ -161,6 +161,11 @@ class GpsError(_Table, frozen=True):
         s = math.hypot(self.bias_sigma, self.noise_sigma)
         return s * (self.urban_factor if urban else 1.0)
 
+    def as_white(self) -> GpsError:
+        """The same error taken for white noise of the same size: no bias,
+        the noise its steady-state sigma (what a filter without a bias state assumes)."""
+        return msgspec.structs.replace(self, bias_sigma=0.0, noise_sigma=self.horizontal_sigma())
+
 
 class CompassError(_Table, frozen=True):
     """Phone compass error in degrees: a bias drawn once per phone and white noise."""

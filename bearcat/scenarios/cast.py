@@ -19,7 +19,7 @@ import numpy as np
 import shapely
 
 from bearcat.agents.ground_station.calibration import Calibration
-from bearcat.agents.ground_station.calibration_store import load_calibration
+from bearcat.agents.ground_station.calibration_store import calibrate_command, load_calibration
 from bearcat.agents.ground_station.ctf_cache import (
     CtfGame,
     default_rules,
@@ -306,9 +306,10 @@ class _CtfGame:
             phase=self.phase,
             methods=methods,
             uncertainty=_uncertainty(s),
-            calibration=self.calibration(profile) if methods[self.attacker.id] == "calibrated" else None,
+            calibration=self.calibration(profile) if self._calibrated_go(methods) else None,
             alpha=s.alpha,
             defender_quantile=s.defender_quantile,
+            ablate=s.ablate,
         )
         advisor: CtfAdvisor | SearchAdvisor = self._advisor
         if s.uavs:
@@ -316,24 +317,27 @@ class _CtfGame:
         sight = self.sight if self.sight.line_of_sight or s.uavs else None
         return _service(s, advisor, sight=sight, tracking=tracking(s, profile) if calibrated else None)
 
+    def _calibrated_go(self, methods: dict[str, str]) -> bool:
+        """Whether the attacker's go takes a calibrated margin."""
+        return methods[self.attacker.id] == "calibrated" and "calibration" not in self.scenario.ablate
+
     def calibration(self, profile: Profile) -> Calibration | None:
         """The game's calibration on ``profile``, if ``bearcat calibrate`` made
         one; if not, the log says so, once per process (a study's worker plays
         many games of one scenario)."""
         s = self.scenario
-        found = load_calibration(self.own(), profile, s.alpha)
-        missing = (s.name, profile.name, s.alpha)
+        found = load_calibration(self.own(), profile, s.alpha, s.ablate)
+        missing = (s.name, profile.name, s.alpha, s.ablate)
         if found is None and missing not in _UNCALIBRATED:
             _UNCALIBRATED.add(missing)
             log.warning(
                 "%s: no calibration of map %s on profile %s at alpha %g yet: calibrated guidance takes its margin "
-                "from the tracker's belief until 'bearcat calibrate %s --netem %s' has run",
+                "from the tracker's belief until '%s' has run",
                 s.name,
                 s.map.name,
                 profile.name,
                 s.alpha,
-                s.name,
-                profile.name,
+                calibrate_command(s.name, profile.name, s.ablate),
             )
         return found
 
@@ -517,9 +521,14 @@ def _service(scenario: Scenario, advisor, sight=None, tracking=None) -> Guidance
 def tracking(scenario: Scenario, profile: Profile) -> Callable[[], Trackers]:
     """Makes the trackers of calibrated guidance: the profile's GPS and
     compass, and each person's motion from their speed, heading error and
-    report rate (UAVs get the default)."""
+    report rate (UAVs get the default); less what ``guidance.ablate``
+    switches off of them."""
     motions = {a.id: Motion.of(a.speed, a.heading_error, 1.0 / a.fix_rate) for a in scenario.agents}
-    return functools.partial(Trackers, scenario.map, profile.gps, profile.compass, motions=motions)
+    if "manoeuvre" in scenario.ablate:
+        motions = {agent: motion.walking_only() for agent, motion in motions.items()}
+    gps = profile.gps.as_white() if "bias" in scenario.ablate else profile.gps
+    to_now = "prediction" not in scenario.ablate
+    return functools.partial(Trackers, scenario.map, gps, profile.compass, motions=motions, to_now=to_now)
 
 
 def _uncertainty(scenario: Scenario) -> Uncertainty:

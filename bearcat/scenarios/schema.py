@@ -95,6 +95,18 @@ GAME_UNCERTAINTIES: dict[Game, tuple[Uncertainty, ...]] = {
     "pursuit": ("none",),
 }
 """The forms each game's guidance has; the last is a scenario's default."""
+Ablation = Literal["prediction", "bias", "manoeuvre", "calibration", "belief"]
+ABLATIONS: tuple[Ablation, ...] = get_args(Ablation)
+"""Parts of calibrated guidance a study may switch off, to measure what each
+gives: ``prediction`` (the trackers' beliefs stay at each player's latest
+fix instead of going on to now), ``bias`` (the trackers take the GPS error
+for white noise of the same size, with no bias state), ``manoeuvre`` (one
+walking mode: a feint does not widen the prediction), ``calibration`` (the
+attacker's go takes the tracker's own margin, not the calibrated one) and
+``belief`` (the defender steers by the plain heading at the prediction, not
+by a quantile over its belief)."""
+TRACKER_ABLATIONS: tuple[Ablation, ...] = ("prediction", "bias", "manoeuvre")
+"""The ablations that change what the trackers estimate, and so what a calibration measures."""
 Transport = Literal["tcp", "udp"]
 TRANSPORTS: tuple[Transport, ...] = get_args(Transport)
 """How best-effort messages (fixes, guidance) travel in live runs; reliable ones always go over tcp."""
@@ -319,6 +331,8 @@ class GuidanceTable(_Table, frozen=True):
     # calibrated: the share of the tracker's belief the defender's heading
     # is allowed to lose against; 0.5 acts on the median value.
     defender_quantile: Annotated[float, Meta(gt=0.0, lt=1.0)] = 0.5
+    # calibrated: parts switched off (ABLATIONS), for studies of what each gives.
+    ablate: tuple[Ablation, ...] = ()
 
 
 class ScenarioFile(_Table, frozen=True):
@@ -353,6 +367,7 @@ class Scenario:
     faults: tuple = ()  # the scenario's own fault plan (scenarios.faults)
     alpha: float = 0.01  # calibrated: the false-go share the margin allows
     defender_quantile: float = 0.5  # calibrated: the share of the belief the defender may lose against
+    ablate: tuple[str, ...] = ()  # calibrated: parts switched off (ABLATIONS)
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
@@ -439,6 +454,7 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         guidance_confidence=file.guidance.confidence,
         alpha=file.guidance.alpha,
         defender_quantile=file.guidance.defender_quantile,
+        ablate=tuple(dict.fromkeys(file.guidance.ablate)),
         agents=file.agent,
         description=head.description,
         text=text,

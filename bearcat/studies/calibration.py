@@ -36,10 +36,21 @@ CALIBRATION_SEED = 100_000
 """The first seed ``bearcat calibrate`` plays by default: disjoint from every study's."""
 
 
-def calibration_tasks(scenario: str, netem: str, first: int, count: int, part: str) -> list[dict]:
-    """One task per game of seeds ``first`` to ``first + count - 1``, of ``part`` ("fit" or "check")."""
+def calibration_tasks(
+    scenario: str, netem: str, first: int, count: int, part: str, ablate: list[str] | None = None
+) -> list[dict]:
+    """One task per game of seeds ``first`` to ``first + count - 1``, of
+    ``part`` ("fit" or "check"), scored through trackers less ``ablate``."""
+    tag = "".join(f"|no-{a}" for a in ablate or ())
     return [
-        {"key": f"{scenario}|{netem}|{seed}", "scenario": scenario, "netem": netem, "seed": seed, "part": part}
+        {
+            "key": f"{scenario}|{netem}{tag}|{seed}",
+            "scenario": scenario,
+            "netem": netem,
+            "seed": seed,
+            "part": part,
+            "ablate": list(ablate or ()),
+        }
         for seed in range(first, first + count)
     ]
 
@@ -54,7 +65,8 @@ def play_calibration_task(task: dict) -> dict:
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.variants import vary
 
-    scenario = vary(load_scenario(task["scenario"]), {"guidance.uncertainty": "none", "agent.*.uncertainty": "none"})
+    plain = {"guidance.uncertainty": "none", "agent.*.uncertainty": "none", "guidance.ablate": task.get("ablate", [])}
+    scenario = vary(load_scenario(task["scenario"]), plain)
     profile = load_profile(task["netem"])
     with tempfile.TemporaryDirectory() as tmp:
         events = f"{tmp}/events.jsonl"

@@ -4,7 +4,8 @@
   defender-winning position, feints until its display shows a window. The
   unaided defender's outcome is mapped over the human factors that decide
   it: how far in front of the attacker it marks, how late it reacts, how
-  often the phones report; the worst-case aided defender is the reference row.
+  often the phones report; the aided defender, on plain, worst-case and
+  calibrated guidance, gives the reference rows.
 - ``holding``: the aided defender from the fake-out starts, its guidance
   plain, worst-case or calibrated (``guidance.uncertainty``), per network
   profile and report rate.
@@ -41,6 +42,18 @@ worst case over where the players may be, GPS error included (its 95 %
 circle), or over how far they may have moved only; and answers at where
 the trackers predict them, with the calibrated margin (``bearcat calibrate``
 on the same scenario and profile, else the tracker's own)."""
+ABLATED = {
+    f"calibrated, no {part}": GUIDANCE["calibrated"] | {"ablate": [part]}
+    for part in ("prediction", "bias", "manoeuvre", "calibration", "belief")
+}
+"""Calibrated guidance with one part switched off (``guidance.ablate``), to
+measure what that part gives. A study plays these only when asked by name."""
+STUDY_ABLATIONS = {
+    "holding": ("prediction", "bias", "manoeuvre", "belief"),
+    "go-no-go": ("prediction", "bias", "manoeuvre", "calibration"),
+}
+"""The parts whose ablation a study offers: the defender's holding uses no
+calibration, the attacker's go no belief quantile."""
 
 MARKING = (3.0, 6.0, 9.0, 12.0)
 """The unaided defender's marking distance (m in front of the attacker on its run home)."""
@@ -74,9 +87,15 @@ class Study:
 
 def _guidance(name: str, who: str | None) -> dict:
     """The changes that give ``who`` (None: everybody) guidance ``name``."""
-    spec = GUIDANCE[name]
+    spec = (GUIDANCE | ABLATED)[name]
     method = "guidance.uncertainty" if who is None else f"agent.{who}.uncertainty"
-    return {method: spec["uncertainty"], "guidance.confidence": spec["confidence"]}
+    ablate = {"guidance.ablate": spec["ablate"]} if "ablate" in spec else {}
+    return {method: spec["uncertainty"], "guidance.confidence": spec["confidence"]} | ablate
+
+
+def _offered(study: str) -> list[str]:
+    """The guidance ``study``'s cells vary over: every form, then its ablations."""
+    return [*GUIDANCE, *(f"calibrated, no {part}" for part in STUDY_ABLATIONS[study])]
 
 
 def _fake_out_cells() -> tuple[Cell, ...]:
@@ -91,12 +110,13 @@ def _fake_out_cells() -> tuple[Cell, ...]:
                 }
                 labels = {"defender": "unaided", "marking": marking, "reaction": reaction, "rate": rate}
                 cells.append(Cell("fake-out", changes, labels))
-            changes = _guidance("worst-case", "defender") | {
-                "agent.defender.reaction": reaction,
-                "agent.*.fix_rate": rate,
-            }
-            labels = {"defender": "worst-case aided", "marking": None, "reaction": reaction, "rate": rate}
-            cells.append(Cell("fake-out-aided-defender", changes, labels))
+            for guidance in ("plain", "worst-case", "calibrated"):
+                changes = _guidance(guidance, "defender") | {
+                    "agent.defender.reaction": reaction,
+                    "agent.*.fix_rate": rate,
+                }
+                labels = {"defender": f"{guidance} aided", "marking": None, "reaction": reaction, "rate": rate}
+                cells.append(Cell("fake-out-aided-defender", changes, labels))
     return tuple(cells)
 
 
@@ -106,7 +126,8 @@ STUDIES = {
         (None,),
         ("defender", "marking", "reaction", "rate"),
         "the fake-out's outcome against the unaided defender over its marking distance, its reaction time and "
-        "the phones' report rate, with the worst-case aided defender as the reference (3.5.1)",
+        "the phones' report rate, with the aided defender on plain, worst-case and calibrated guidance as the "
+        "reference (3.5.1)",
     ),
     "holding": Study(
         tuple(
@@ -115,7 +136,7 @@ STUDIES = {
                 _guidance(g, "defender") | {"agent.*.fix_rate": rate},
                 {"guidance": g, "rate": rate},
             )
-            for g in GUIDANCE
+            for g in _offered("holding")
             for rate in REPORT_RATES
         ),
         PROFILES,
@@ -124,7 +145,7 @@ STUDIES = {
         "guidance, per network profile and report rate",
     ),
     "go-no-go": Study(
-        tuple(Cell("go-no-go", _guidance(g, None), {"guidance": g}) for g in GUIDANCE),
+        tuple(Cell("go-no-go", _guidance(g, None), {"guidance": g}) for g in _offered("go-no-go")),
         PROFILES,
         ("guidance",),
         "how often an attacker's go, decided on what the network delivered, is false, per network profile, "
@@ -141,12 +162,18 @@ STUDIES = {
 
 
 def study_cells(study: str, guidance=None) -> tuple[Cell, ...]:
-    """The cells of ``study``; with ``guidance`` (names of ``GUIDANCE``), only
-    those of that guidance (and those that vary no guidance)."""
+    """The cells of ``study``; with ``guidance`` (names of ``GUIDANCE`` or
+    ``ABLATED``), only those of that guidance (and those that vary no
+    guidance); without, all but the ablations."""
     cells = STUDIES[study].cells
     if guidance is None:
-        return cells
+        return tuple(c for c in cells if c.labels.get("guidance") not in ABLATED)
     return tuple(c for c in cells if c.labels.get("guidance", guidance[0]) in guidance)
+
+
+def study_guidance(study: str) -> list[str]:
+    """The guidance names ``study``'s cells vary over, in order."""
+    return list(dict.fromkeys(c.labels["guidance"] for c in STUDIES[study].cells if "guidance" in c.labels))
 
 
 def study_tasks(study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None) -> list[dict]:

@@ -36,6 +36,7 @@ operations (benchmarks/tracker.py times it against Stone Soup's IMM).
 from __future__ import annotations
 
 import bisect
+import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field
@@ -91,6 +92,11 @@ class Motion:
         sigma = math.radians(heading_error)
         walk = max(2.0 * speed**2 * sigma**2 / HEADING_TAU, 0.02)
         return cls(walk=walk, manoeuvre=2.0 * speed**2 / fix_period, initial_speed=max(speed / 2.0, 0.5))
+
+    def walking_only(self) -> Motion:
+        """This model without its manoeuvring mode: the walking mode is never
+        left (an ablation: what the manoeuvre model gives)."""
+        return dataclasses.replace(self, onset=0.0)
 
 
 @dataclass(frozen=True)
@@ -429,7 +435,8 @@ def _moments(mu: np.ndarray, means: np.ndarray, covs: np.ndarray) -> tuple[np.nd
 class Trackers:
     """A tracker per player on ``game_map``: each fix to its player's, every
     player predicted to one moment. ``motions`` gives a player's ``Motion``
-    (others get ``default``)."""
+    (others get ``default``). ``to_now=False`` leaves each belief at its
+    player's latest fix instead (an ablation: what predicting to now gives)."""
 
     def __init__(
         self,
@@ -439,12 +446,14 @@ class Trackers:
         *,
         motions: dict[str, Motion] | None = None,
         default: Motion | None = None,
+        to_now: bool = True,
     ) -> None:
         self.map = game_map
         self.gps = gps
         self.compass = compass
         self.motions = dict(motions or {})
         self.default = default or Motion.of(3.0)
+        self.to_now = to_now
         self.trackers: dict[str, Tracker] = {}
 
     def take(self, fix: Fix) -> bool:
@@ -459,7 +468,7 @@ class Trackers:
         """Every player with a fix, as believed at ``now``."""
         out = {}
         for agent, tracker in self.trackers.items():
-            belief = tracker.predict(now)
+            belief = tracker.predict(now if self.to_now else -math.inf)
             if belief is not None:
                 out[agent] = belief
         return out

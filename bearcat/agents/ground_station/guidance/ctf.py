@@ -20,6 +20,9 @@ Each agent's guidance treats the stale, noisy fixes in one of three ways
   and the note says so. The defender's heading is the one whose step leaves
   a quantile of the value over samples of the belief best
   (``solvers.ctf_sampled``), and its value is that quantile.
+  ``ablate`` (``guidance.ablate``) switches parts off for a study: with
+  ``calibration`` the margin is the tracker's own, with ``belief`` the
+  defender steers by the plain heading at the prediction.
 """
 
 from __future__ import annotations
@@ -90,6 +93,7 @@ class CtfAdvisor:
         calibration: Calibration | None = None,
         alpha: float = 0.01,
         defender_quantile: float = 0.5,
+        ablate: tuple[str, ...] = (),
     ):
         self.map = game_map
         self.attacker, self.defender = attacker, defender
@@ -100,6 +104,7 @@ class CtfAdvisor:
         self.calibration = calibration
         self.alpha = alpha
         self.defender_quantile = defender_quantile
+        self.ablate = frozenset(ablate)
         self.adopt(solved)
 
     @property
@@ -208,16 +213,20 @@ class CtfAdvisor:
                 "margin": None if margin is None else round(margin, 3),
                 "note": note,
             }
-        answer = sampled.answer(
-            "defender", attackers, defenders, self.defender_quantile, self.phase, (report.defender_heading,)
-        )
+        if "belief" in self.ablate:
+            heading, value = report.defender_heading, float(report.value)
+        else:
+            answer = sampled.answer(
+                "defender", attackers, defenders, self.defender_quantile, self.phase, (report.defender_heading,)
+            )
+            heading, value = answer.heading, answer.value
         return {
             "game": "ctf",
-            "heading": None if answer.heading is None else bearing(*answer.heading),
+            "heading": None if heading is None else bearing(*heading),
             "region": self._region_near("attacker", d),
             "region_of": self.attacker,
             "go": None,
-            "value": answer.value,
+            "value": value,
         }
 
     def _margin(self, age: float, value: float, attackers, defenders) -> tuple[float | None, str]:
@@ -227,6 +236,8 @@ class CtfAdvisor:
             assert sampled is not None  # made for calibrated guidance
             spread = sampled.values(attackers, defenders, self.phase)
             own = float(np.quantile(spread, 1.0 - self.alpha)) - value
+            if "calibration" in self.ablate:
+                return own, "calibration switched off (guidance.ablate): the margin is the tracker's own"
             return own, "not calibrated yet: the margin is the tracker's own (bearcat calibrate)"
         margin = self.calibration.margin(self.phase, age)
         if margin is None:
