@@ -119,6 +119,21 @@ def test_sampled_values_are_the_queries_values(field_game):
     np.testing.assert_allclose(values, expected, atol=1e-9)
 
 
+def test_sampled_quantiles_are_numpys(field_game):
+    from bearcat.solvers.ctf_sampled import SampledCtf, _row_quantiles
+
+    rng = np.random.default_rng(9)
+    for n in (1, 2, 7, 64):
+        values = rng.normal(size=(5, n))
+        for q in (0.0, 0.01, 0.5, 0.99, 1.0):
+            np.testing.assert_allclose(_row_quantiles(values, q), np.quantile(values, q, axis=1), atol=1e-12)
+    attackers = np.array([25.0, 22.0]) + rng.normal(0.0, 2.0, size=(64, 2))
+    defenders = np.array([25.0, 34.0]) + rng.normal(0.0, 1.0, size=(64, 2))
+    sampled = SampledCtf(field_game)
+    expected = np.quantile(sampled.values(attackers, defenders, "return"), 0.99)
+    assert sampled.quantile(attackers, defenders, 0.99, "return") == pytest.approx(expected, abs=1e-12)
+
+
 def test_a_quantile_heading_is_never_worse_than_the_plain_one_at_its_own_quantile(field_game):
     from bearcat.solvers.ctf_sampled import SampledCtf
 

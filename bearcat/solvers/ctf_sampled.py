@@ -61,7 +61,13 @@ class SampledCtf:
         map metres, clamped to the grid as every query is."""
         a, d = _pairs(attackers, defenders)
         value = self.queries.value_set(phase).value
-        return _values_at(value, self._lo, self._spacing, a, d, np.zeros((1, 2)), False)[0]
+        return _values_at(value, self._lo, self._spacing, a, d, _NO_STEP, False)[0]
+
+    def quantile(self, attackers, defenders, level: float, phase: str = "capture") -> float:
+        """The ``level`` quantile of the value over the joint samples (numpy's "linear" rule)."""
+        a, d = _pairs(attackers, defenders)
+        value = self.queries.value_set(phase).value
+        return float(_row_quantiles(_values_at(value, self._lo, self._spacing, a, d, _NO_STEP, False), level)[0])
 
     def answer(
         self, side: str, attackers, defenders, level: float, phase: str = "capture", preferred=()
@@ -83,7 +89,7 @@ class SampledCtf:
         q = level if side == "defender" else 1.0 - level
         sign = -1.0 if side == "defender" else 1.0  # the mover minimises sign x quantile
         value = self.queries.value_set(phase).value
-        here = float(np.quantile(_values_at(value, self._lo, self._spacing, a, d, np.zeros((1, 2)), False)[0], q))
+        here = float(_row_quantiles(_values_at(value, self._lo, self._spacing, a, d, _NO_STEP, False), q)[0])
         tried = np.array([h for h in preferred if h is not None] + [tuple(u) for u in self._directions], float)
         geometry = self.queries.geometry
         usable = _open_steps(
@@ -93,10 +99,13 @@ class SampledCtf:
             return SampledAnswer(side, here, None)
         steps = self.step * tried[usable]
         stepped = _values_at(value, self._lo, self._spacing, a, d, steps, side == "defender")
-        scores = sign * np.quantile(stepped, q, axis=1)
+        scores = sign * _row_quantiles(stepped, q)
         best = int(np.argmin(scores))  # the first of equals
         heading = tried[usable][best]
         return SampledAnswer(side, here, (float(heading[0]), float(heading[1])))
+
+
+_NO_STEP = np.zeros((1, 2))
 
 
 def _pairs(attackers, defenders) -> tuple[np.ndarray, np.ndarray]:
@@ -157,6 +166,23 @@ def _values_at(v, lo, spacing, attackers, defenders, steps, defender_moves):
                 if w != 0.0:
                     total += w * v[i0, i1, i2, i3]
             out[k, i] = total
+    return out
+
+
+@numba.njit(cache=True)
+def _row_quantiles(values, q):
+    """The ``q`` quantile of each row, interpolated linearly between order
+    statistics as ``np.quantile`` does by default, without its per-call cost
+    (a third of a millisecond, paid 33 times a second per phone)."""
+    h, n = values.shape
+    out = np.empty(h)
+    at = q * (n - 1)
+    below = min(int(np.floor(at)), n - 1)
+    above = min(below + 1, n - 1)
+    frac = at - below
+    for k in range(h):
+        row = np.sort(values[k])
+        out[k] = row[below] + frac * (row[above] - row[below])
     return out
 
 

@@ -156,14 +156,17 @@ class Belief:
         jittering between guidance messages."""
         cumulative = np.cumsum(self.weights / self.weights.sum())
         modes = np.minimum(np.searchsorted(cumulative, uniforms, side="right"), len(self.weights) - 1)
-        out = np.empty((len(uniforms), 2))
-        for j in range(len(self.weights)):
-            chosen = modes == j
-            if chosen.any():
-                cov = self.covariances[j][POSITION, POSITION]
-                root = np.linalg.cholesky(cov + 1e-12 * np.eye(2))
-                out[chosen] = self.means[j][POSITION] + normals[chosen] @ root.T
-        return out
+        # Each mode's position covariance [[a, b], [b, c]] and its Cholesky root [[l00, 0], [l10, l11]].
+        a = self.covariances[:, 0, 0] + 1e-12
+        b = self.covariances[:, 0, 1]
+        c = self.covariances[:, 1, 1] + 1e-12
+        l00 = np.sqrt(a)
+        l10 = b / l00
+        l11 = np.sqrt(np.maximum(c - l10 * l10, 0.0))
+        mean = self.means[modes, :2]
+        east = mean[:, 0] + l00[modes] * normals[:, 0]
+        north = mean[:, 1] + l10[modes] * normals[:, 0] + l11[modes] * normals[:, 1]
+        return np.stack([east, north], axis=1)
 
 
 @dataclass(frozen=True)

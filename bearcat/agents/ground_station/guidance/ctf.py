@@ -127,6 +127,7 @@ class CtfAdvisor:
         self._regions: dict[str, tuple[tuple, list]] = {}
         self._outlines: dict[str, tuple[tuple, list]] = {}
         self._last: dict[str, tuple[tuple, dict]] = {}
+        self._drawn: tuple[Belief, Belief, tuple[np.ndarray, np.ndarray]] | None = None
 
     def warm_up(self, starts) -> None:
         """Run the query kernels, then answer each side once with the
@@ -199,10 +200,8 @@ class CtfAdvisor:
             report = self.solved.evaluate(a, d, self.phase)
         except InputError as exc:
             return {"game": "ctf", "note": str(exc)[:200]}
-        (za, ua), (zd, ud) = DRAWS
-        attackers, defenders = estimate.attacker.draw(za, ua), estimate.defender.draw(zd, ud)
         if agent == self.attacker:
-            margin, note = self._margin(estimate.age, float(report.value), attackers, defenders)
+            margin, note = self._margin(estimate, float(report.value))
             return {
                 "game": "ctf",
                 "heading": None if report.attacker_heading is None else bearing(*report.attacker_heading),
@@ -216,6 +215,7 @@ class CtfAdvisor:
         if "belief" in self.ablate:
             heading, value = report.defender_heading, float(report.value)
         else:
+            attackers, defenders = self._samples(estimate)
             answer = sampled.answer(
                 "defender", attackers, defenders, self.defender_quantile, self.phase, (report.defender_heading,)
             )
@@ -229,19 +229,28 @@ class CtfAdvisor:
             "value": value,
         }
 
-    def _margin(self, age: float, value: float, attackers, defenders) -> tuple[float | None, str]:
+    def _samples(self, estimate: Estimate) -> tuple[np.ndarray, np.ndarray]:
+        """The joint samples of ``estimate``'s beliefs (``DRAWS`` through
+        each), drawn once for both players' answers at one moment."""
+        held = self._drawn
+        if held is None or held[0] is not estimate.attacker or held[1] is not estimate.defender:
+            (za, ua), (zd, ud) = DRAWS
+            samples = (estimate.attacker.draw(za, ua), estimate.defender.draw(zd, ud))
+            held = self._drawn = (estimate.attacker, estimate.defender, samples)
+        return held[2]
+
+    def _margin(self, estimate: Estimate, value: float) -> tuple[float | None, str]:
         """The margin the attacker's go adds to ``value``, and what the phone is told of it."""
         if self.calibration is None:
             sampled = self.sampled
             assert sampled is not None  # made for calibrated guidance
-            spread = sampled.values(attackers, defenders, self.phase)
-            own = float(np.quantile(spread, 1.0 - self.alpha)) - value
+            own = sampled.quantile(*self._samples(estimate), 1.0 - self.alpha, self.phase) - value
             if "calibration" in self.ablate:
                 return own, "calibration switched off (guidance.ablate): the margin is the tracker's own"
             return own, "not calibrated yet: the margin is the tracker's own (bearcat calibrate)"
-        margin = self.calibration.margin(self.phase, age)
+        margin = self.calibration.margin(self.phase, estimate.age)
         if margin is None:
-            return None, f"no go on reports {age:.1f} s old: the calibration has too few games that old"
+            return None, f"no go on reports {estimate.age:.1f} s old: the calibration has too few games that old"
         return margin, ""
 
     def _region_near(self, mover: str, where: np.ndarray) -> list:
