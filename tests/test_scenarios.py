@@ -211,6 +211,21 @@ def test_a_study_refuses_guidance_it_does_not_vary_in_one_sentence(capsys):
     said = capsys.readouterr().err.strip().splitlines()[-1]
     assert "--guidance 'calibrated, no belief': the go-no-go study has no such cells" in said
     assert "'calibrated, no calibration'" in said
+    assert main(["study", "go-no-go", "--rate", "1", "--trials", "1"]) == 2
+    assert "the go-no-go study has no such cells; its rates are none" in capsys.readouterr().err
+
+
+def test_a_study_plays_only_the_report_rates_asked_for():
+    from bearcat.studies.thesis import study_tasks
+
+    tasks = study_tasks("holding", 2, 0, ["wifi"], guidance=["plain", "calibrated"], rates=[1.0, 5.0])
+    assert sorted({(t["labels"]["guidance"], t["labels"]["rate"]) for t in tasks}) == [
+        ("calibrated", 1.0),
+        ("calibrated", 5.0),
+        ("plain", 1.0),
+        ("plain", 5.0),
+    ]
+    assert len(tasks) == 8
 
 
 def test_the_wilson_interval_matches_the_textbook_and_stays_in_zero_one():

@@ -50,6 +50,13 @@ def register(commands: Commands) -> None:
         help=f"play only the cells of this guidance: {', '.join(map(repr, GUIDANCE))} (default: each of these), "
         "or calibrated guidance with a part switched off: " + ", ".join(map(repr, ABLATED)),
     )
+    p.add_argument(
+        "--rate",
+        nargs="+",
+        type=float,
+        metavar="HZ",
+        help="play only the cells of these report rates (holding, fake-out; default: every one)",
+    )
     arguments.add_batch_options(p, "games")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
     p.add_argument(
@@ -80,6 +87,7 @@ def run(args) -> int:
         raise arguments.UsageError("--human plays its games live on this machine; it takes no --cluster")
     arguments.check_seeds(args.seed, args.trials)
     _check_guidance(args.study, args.guidance)
+    _check_rates(args.study, args.rate)
     report = Output(args.json)
     out = args.out or Path("studies") / args.study
     make_directory(out, "results directory")
@@ -94,7 +102,9 @@ def run(args) -> int:
             play_human_trials(out, args.human, args.trials, args.seed, say=report.say)
             results = read_results(out / "results.jsonl")  # the models' games beside the person's
         else:
-            tasks = study_tasks(args.study, args.trials, args.seed, args.netem, args.transport, args.guidance)
+            tasks = study_tasks(
+                args.study, args.trials, args.seed, args.netem, args.transport, args.guidance, args.rate
+            )
             for line in uncalibrated(tasks):
                 report.say(line)
             with counting(len(tasks), args.study, "game") as finished:
@@ -128,6 +138,17 @@ def _check_guidance(study: str, guidance) -> None:
         if name not in offered:
             has = ", ".join(map(repr, offered)) or "none: it varies no guidance"
             raise arguments.UsageError(f"--guidance {name!r}: the {study} study has no such cells; it has {has}")
+
+
+def _check_rates(study: str, rates) -> None:
+    """Each report rate asked for is one ``study`` varies."""
+    from bearcat.studies.thesis import study_rates
+
+    offered = study_rates(study)
+    for rate in rates or ():
+        if rate not in offered:
+            has = ", ".join(f"{r:g}" for r in offered) + " Hz" if offered else "none: it varies no report rate"
+            raise arguments.UsageError(f"--rate {rate:g}: the {study} study has no such cells; its rates are {has}")
 
 
 def _presolve(study) -> None:

@@ -176,12 +176,21 @@ def study_guidance(study: str) -> list[str]:
     return list(dict.fromkeys(c.labels["guidance"] for c in STUDIES[study].cells if "guidance" in c.labels))
 
 
-def study_tasks(study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None) -> list[dict]:
-    """The games of ``study``: per cell (of ``guidance``, if given), profile,
-    transport (None: the scenario's), ``trials`` seeds."""
+def study_rates(study: str) -> list[float]:
+    """The report rates ``study``'s cells vary over, in order (none: it varies none)."""
+    return sorted({c.labels["rate"] for c in STUDIES[study].cells if "rate" in c.labels})
+
+
+def study_tasks(
+    study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None, rates=None
+) -> list[dict]:
+    """The games of ``study``: per cell (of ``guidance`` and ``rates``, if
+    given), profile, transport (None: the scenario's), ``trials`` seeds."""
     spec = STUDIES[study]
     tasks = []
     for cell in study_cells(study, guidance):
+        if rates is not None and cell.labels.get("rate") not in rates:
+            continue
         for profile in profiles or spec.profiles:
             for transport in transports or (None,):
                 for s in range(seed, seed + trials):
