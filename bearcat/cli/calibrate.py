@@ -22,7 +22,7 @@ from bearcat.cli.writing import make_directory, writing
 
 
 def register(commands: Commands) -> None:
-    from bearcat.scenarios.schema import TRACKER_ABLATIONS
+    from bearcat.agents.ground_station.tracker import TRACKER_ABLATIONS
     from bearcat.studies.calibration import CALIBRATION_SEED
 
     p = commands.add_parser(

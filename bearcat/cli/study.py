@@ -169,9 +169,10 @@ def uncalibrated(tasks) -> list[str]:
     """A line for each scenario and profile whose calibrated attackers will
     have no calibration to answer from, naming the command that makes one."""
     from bearcat.agents.ground_station.calibration_store import calibrate_command, load_calibration
+    from bearcat.agents.ground_station.tracker import TRACKER_ABLATIONS
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import ctf_of
-    from bearcat.scenarios.schema import TRACKER_ABLATIONS, load_scenario
+    from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.variants import vary
 
     cells = {(t["scenario"], t["netem"], json.dumps(t.get("changes") or {}, sort_keys=True)) for t in tasks}

@@ -46,6 +46,10 @@ def solve_ahead(scenario, netem: str, *, provisional: bool = False, progress: Pr
     )
 
 
+WAITED = 4
+"""Where in the shared array the launcher says it waits for the solve (1)."""
+
+
 class SolveBehind:
     """The ``awaited`` sets (``cast.AwaitedSets``) solved into the cache by
     a child process on otherwise idle processors, from the moment it is made.
@@ -55,7 +59,8 @@ class SolveBehind:
     def __init__(self, awaited) -> None:
         self.awaited = awaited
         context = multiprocessing.get_context("spawn")  # the solver's threads do not survive a fork
-        self._where = context.Array("d", 4)  # set's place in the stages, game time reached, horizon, change
+        # The set's place in the stages, game time reached, horizon, change; and whether it is waited for.
+        self._where = context.Array("d", 5)
         self._process = context.Process(
             target=_solve_behind,
             # Pickled here, unpickled after the child lowered its priority: loading
@@ -85,10 +90,12 @@ class SolveBehind:
         if not self.done:
             grid = self.awaited.game.grid_points
             say(f"solving the {grid}-point sets so the next run starts on them (Ctrl-C leaves them for later)")
+            self._where[WAITED] = 1.0
+            _promote(self._process.pid)
             names = STAGES[self.awaited.stages]
             try:
                 while not self.done:
-                    k, t, horizon, change = self._where[:]
+                    k, t, horizon, change = self._where[:WAITED]
                     if horizon > 0 and progress is not None:
                         progress(names[int(k)], t, horizon, change)
                     time.sleep(0.2)
@@ -137,10 +144,32 @@ def _idle() -> None:
     die_with_parent()
 
 
+def _promote(pid: int | None = None) -> None:
+    """Give every thread of process ``pid`` (None: this one) an ordinary
+    share of the processors: once the game is over somebody waits for the
+    solve, and on a machine kept busy by other work an idle-only solve would
+    not move. The launcher promotes the child when it starts to wait; the
+    child, having made itself idle, promotes itself if the launcher already
+    waits, in case it did so after the launcher's promotion."""
+    if not hasattr(os, "SCHED_IDLE"):
+        return
+    try:
+        threads = os.listdir(f"/proc/{pid or 'self'}/task")
+    except OSError:
+        return  # gone, or no /proc
+    for tid in threads:
+        try:
+            os.sched_setscheduler(int(tid), os.SCHED_OTHER, os.sched_param(0))
+        except OSError:
+            pass  # a thread that ended meanwhile, or a system that does not let us: it stays idle-only
+
+
 def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
     """The child's work: solve the game's ``stages`` into the cache, reporting
     in ``where``, on idle processors only, so a peer never waits for it."""
     _idle()
+    if where[WAITED]:  # the launcher started waiting, and promoting us, before we made ourselves idle
+        _promote()
     from bearcat.agents.ground_station.ctf_cache import load_or_solve
     from bearcat.solvers.ctf import STAGES
 
@@ -148,7 +177,7 @@ def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
     names = STAGES[stages]
 
     def report(name: str, t: float, horizon: float, change: float) -> None:
-        where[:] = [names.index(name), t, horizon, change]
+        where[:WAITED] = [names.index(name), t, horizon, change]
 
     try:
         load_or_solve(game, stages, progress=report)

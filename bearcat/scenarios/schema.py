@@ -105,8 +105,6 @@ walking mode: a feint does not widen the prediction), ``calibration`` (the
 attacker's go takes the tracker's own margin, not the calibrated one) and
 ``belief`` (the defender steers by the plain heading at the prediction, not
 by a quantile over its belief)."""
-TRACKER_ABLATIONS: tuple[Ablation, ...] = ("prediction", "bias", "manoeuvre")
-"""The ablations that change what the trackers estimate, and so what a calibration measures."""
 Transport = Literal["tcp", "udp"]
 TRANSPORTS: tuple[Transport, ...] = get_args(Transport)
 """How best-effort messages (fixes, guidance) travel in live runs; reliable ones always go over tcp."""

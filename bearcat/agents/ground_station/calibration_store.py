@@ -20,8 +20,8 @@ from pathlib import Path
 
 from bearcat.agents.ground_station.calibration import Calibration
 from bearcat.agents.ground_station.ctf_cache import CtfGame, cache_root, write_atomically
+from bearcat.agents.ground_station.tracker import TRACKER_ABLATIONS
 from bearcat.netem.profiles import Profile
-from bearcat.scenarios.schema import TRACKER_ABLATIONS
 
 log = logging.getLogger(__name__)
 

@@ -50,6 +50,10 @@ from bearcat.netem.models import CompassError, GpsError
 
 log = logging.getLogger(__name__)
 
+TRACKER_ABLATIONS = ("prediction", "bias", "manoeuvre")
+"""The parts of the trackers a study may switch off (``guidance.ablate``):
+they change what the trackers estimate, and so what a calibration measures."""
+
 WALKING, MANOEUVRING = 0, 1
 MODES = ("walking", "manoeuvring")
 
