@@ -32,7 +32,7 @@ def test_the_documentation_has_python_examples():
     assert len(EXAMPLES) >= 3
 
 
-@pytest.mark.slow  # the capture-the-flag example solves two 45^4 sets, about a minute
+@pytest.mark.slow  # the capture-the-flag example solves two 31^4 sets, a quarter of a minute
 @pytest.mark.parametrize(("page", "code"), EXAMPLES, ids=[f"{page}-{k}" for k, (page, _) in enumerate(EXAMPLES)])
 def test_a_documented_example_runs(page, code):
     exec(compile(code, page, "exec"), {})
