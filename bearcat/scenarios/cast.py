@@ -53,7 +53,7 @@ from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Sc
 from bearcat.solvers.ctf_queries import CtfQueries
 
 log = logging.getLogger(__name__)
-_UNCALIBRATED: set[tuple[str, str, float]] = set()
+_UNCALIBRATED: set[tuple[str, str, float, tuple[str, ...]]] = set()
 """The scenarios, profiles and alphas this process has said it has no calibration of."""
 
 STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
