@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from bearcat.cli import arguments
 from bearcat.cli.arguments import Commands
 
 
@@ -40,9 +41,10 @@ def register(commands: Commands) -> None:
         "--host",
         action="append",
         default=[],
+        type=arguments.host,
         metavar="ADDRESS",
-        help="a name or address the router is reached at besides the loopback, e.g. the field laptop's "
-        "192.168.1.10 (repeatable); every certificate names them",
+        help="an address (or DNS name) peers on other machines reach the router at, e.g. the field laptop's "
+        "192.168.1.10 (repeatable): the router's certificate (launcher.pem) names it, issued again if it lacks it",
     )
     init.set_defaults(run=run_init)
     listing = actions.add_parser("list", help="who holds a valid certificate in DIR, in which role")
@@ -51,7 +53,9 @@ def register(commands: Commands) -> None:
 
 
 def run_init(args) -> int:
+    from bearcat.bus.identity import hosts_named
     from bearcat.runtime.credentials import add_to
+    from bearcat.scenarios.faults import LAUNCHER
     from bearcat.scenarios.schema import load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -60,6 +64,8 @@ def run_init(args) -> int:
         print(f"{args.directory / name}.pem  {role} {name}")
     if not issued:
         print(f"{args.directory}: every peer of {scenario.name} holds a certificate already")
+    if args.host:
+        print(f"the router's certificate names {', '.join(hosts_named(args.directory, LAUNCHER))}")
     return 0
 
 
