@@ -36,7 +36,7 @@ from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import game_started, wait_for
 from tests.support.machines import Machines
 from tests.support.scenario_files import scenario_text
-from tests.support.system import missing_namespaces
+from tests.support.system import missing_chromium, missing_namespaces
 
 pytestmark = [
     pytest.mark.skipif(missing_namespaces() is not None, reason=str(missing_namespaces())),
@@ -225,3 +225,45 @@ def test_nothing_is_left_behind(field):
     assert field["left"] == []
     assert field["links added"] == set()
     assert re.search(r"held\s+leftovers", field["check"].stdout), field["check"].stdout
+
+
+@pytest.mark.skipif(missing_chromium() is not None, reason=str(missing_chromium()))
+def test_a_phone_on_the_field_network_opens_the_page_at_the_address_the_launcher_names(tmp_path):
+    """The launcher serves the page on every interface of a laptop with no
+    default route (a hotspot with no way out): the link it prints names
+    the laptop's address on the field network, and Chromium on another
+    machine opens it and plays to the end."""
+    path = tmp_path / "game.toml"
+    path.write_text(scenario_text(name=GAME, time_limit=8.0, netem="ideal"))
+    lat, lon = load_scenario(path).map.to_geodetic(25.0, 22.0)  # where the attacker starts
+    out = tmp_path / "run"
+    with Machines("laptop", "phone") as net:
+        launcher = net.start(
+            "laptop",
+            bearcat("run", str(path), "--out", str(out), "--phone", "attacker", "--page", "0.0.0.0:8443"),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+            env=dict(os.environ, PYTHONUNBUFFERED="1"),
+        )
+        said = []
+        for line in launcher.stdout:
+            said.append(line)
+            if link := re.search(r"open (https://\S+) on it", line):
+                break
+        else:
+            pytest.fail(f"the launcher printed no link: {''.join(said)}")
+        phone = net.start(
+            "phone",
+            [sys.executable, "-m", "tests.support.phone_page", link.group(1), str(lat), str(lon), "90"],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            text=True,
+        )
+        shown = json.loads(phone.communicate(timeout=180)[0])
+        output, _ = launcher.communicate(timeout=120)
+    assert link.group(1).startswith(f"https://{net.address('laptop')}:8443/?token="), link.group(1)
+    assert launcher.returncode == 0, "".join(said) + output
+    assert shown["status"] == 200 and shown["phase"] == "game over", shown
+    events = read_events(out / "events.jsonl")
+    assert any(e["event"] == "sent" and e["key"] == keys.fix(GAME, "attacker") for e in events)

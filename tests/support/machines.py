@@ -46,8 +46,8 @@ class Machines:
             laptop, *others = self.names
             for k, name in enumerate(others):
                 near, far = (SUBNET.network_address + 4 * k + host for host in (1, 2))
-                inside(self.pid(laptop), "ip", "link", "add", f"to{k}", "type", "veth", "peer", "name", "eth0",
-                       "netns", str(self.pid(name)))  # fmt: skip
+                pair = ("ip", "link", "add", f"to{k}", "type", "veth", "peer", "name", "eth0")
+                inside(self.pid(laptop), *pair, "netns", str(self.pid(name)))
                 inside(self.pid(laptop), "ip", "addr", "add", f"{near}/30", "dev", f"to{k}")
                 inside(self.pid(laptop), "ip", "link", "set", f"to{k}", "up")
                 inside(self.pid(name), "ip", "addr", "add", f"{far}/30", "dev", "eth0")
