@@ -60,7 +60,7 @@ def hosts(listen: tuple[Endpoint, ...], addresses: tuple[str, ...]) -> tuple[str
     found: list[str] = []
     for endpoint in listen:
         found += addresses if endpoint.wildcard else [endpoint.host]
-    return tuple(dict.fromkeys(h for h in found if not is_loopback(h)))
+    return tuple(dict.fromkeys(found))
 
 
 def reachable_at(
@@ -79,7 +79,7 @@ def reachable_at(
         at = list(addresses)
         if named is not None:
             at = [a for a in addresses if a in named] + [n for n in named if not is_address(n) and not is_loopback(n)]
-        found += [endpoint.at(host) for host in at if not is_loopback(host)]
+        found += [endpoint.at(host) for host in at]
     return [e for e in found if named is None or e.host in named]
 
 
@@ -94,7 +94,7 @@ def uncovered(listen: tuple[Endpoint, ...], addresses: tuple[str, ...], named: t
                     f"({', '.join(addresses) or 'none but the loopback'}), so no peer elsewhere could trust it on "
                     f"--listen {endpoint}: bearcat certs init DIR --scenario SCENARIO --host ADDRESS adds one"
                 )
-        elif endpoint.host not in named and not is_loopback(endpoint.host):
+        elif endpoint.host not in named:
             raise BusError(
                 f"the router's certificate {where} does not name {endpoint.host}, where --listen {endpoint} takes "
                 f"peers from other machines: bearcat certs init DIR --scenario SCENARIO --host {endpoint.host} "
