@@ -142,6 +142,8 @@ def test_certs_init_host_puts_an_address_in_the_routers_certificate_even_once_is
         "the router's certificate names localhost, 127.0.0.1, 192.168.1.10",
     ]
     assert (tmp_path / "field" / "gs.pem").read_bytes() == gs  # the others keep theirs
+    listed = _bearcat("certs", "list", tmp_path / "field").stdout
+    assert "(router at localhost, 127.0.0.1, 192.168.1.10)" in listed, listed
     Credentials(tmp_path / "field", "launcher")  # the new certificate goes with its new key
     for bad, said in (("192.168.1", "is not an IP address"), ("0.0.0.0", "means every interface")):
         refused = _bearcat("certs", "init", tmp_path / "field", "--scenario", "fake-out", "--host", bad)
