@@ -9,7 +9,8 @@ tls/LAPTOP:7447 --joins attacker --joins q1`` with certificates from
 the launcher printed (the attacker's walker, and the UAV peer beside a
 vehicle emulator), which fetch the scenario from the ground station. A
 stranger with no certificate and one with another authority's try to
-connect while the game waits; mid-game the UAV's peer is killed. The game
+connect while the game waits; mid-game, one of them with the attacker's
+certificate reads what it can, and the UAV's peer is killed. The game
 ends with a verdict, ``bearcat check`` holds, and nothing is left. The
 browser test opens a phone's page from the other machine.
 
@@ -56,6 +57,16 @@ camera_radius = 8.0
 search = "nearest"
 """
 ROOT = Path(__file__).resolve().parents[1]
+EAVESDROPPER = """
+import json, sys, time
+from tests.support.intruder import Intruder
+endpoint, certs, seconds, *taps = sys.argv[1:]
+with Intruder(endpoint, ca=f"{certs}/ca.pem", cert=f"{certs}/attacker.pem", key=f"{certs}/attacker.key") as player:
+    for key in taps:
+        player.tap(key)
+    time.sleep(float(seconds))
+    print(json.dumps(sorted({key for key, _, _ in player.heard})))
+"""
 NO_CERTIFICATE = """
 import sys, zenoh
 from tests.support.intruder import Intruder
@@ -155,9 +166,19 @@ def field(tmp_path_factory):
         _, found["impostor said"] = impostor.communicate(timeout=120)
         found["impostor exit"] = impostor.returncode
         assert wait_for(lambda: game_started(out), 300), "the game never started"
+        # The attacker's certificate on a third machine, reading what it can.
+        taps = [keys.guidance(GAME, "attacker"), keys.guidance(GAME, "defender"), keys.truth(GAME, "defender")]
+        eavesdropper = net.start(
+            "stranger",
+            [sys.executable, "-c", EAVESDROPPER, f"tls/{laptop}:{PORT}", str(certs), "4", *taps],
+            cwd=ROOT,
+            **quiet,
+        )
         time.sleep(3.0)
         os.kill(uav.pid, signal.SIGKILL)
         found["killed"] = time.time()
+        heard = eavesdropper.communicate(timeout=60)[0]
+        found["eavesdropper heard"] = json.loads(heard.splitlines()[-1]) if heard.strip() else heard
         rest, _ = launcher.communicate(timeout=120)
         found["said"].append(rest)
         found["launcher exit"] = launcher.returncode
@@ -213,6 +234,12 @@ def test_no_certificate_and_another_authoritys_cannot_connect(field):
         f"certificate is not from the authority in {field['out'].parent / 'foreign' / 'ca.pem'} "
         "(certificate signature failure)"
     ]
+
+
+def test_a_peer_elsewhere_is_held_to_the_access_rules_of_its_certificate(field):
+    """With the attacker's certificate, a third machine hears the attacker's
+    guidance and not the defender's, nor anyone's truth."""
+    assert field["eavesdropper heard"] == [keys.guidance(GAME, "attacker")]
 
 
 def test_a_remote_peer_killed_mid_game_is_seen_gone_within_the_lease(field):
