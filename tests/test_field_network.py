@@ -185,7 +185,12 @@ def field(tmp_path_factory):
         found["walker said"], _ = person.communicate(timeout=30)
         found["walker exit"] = person.returncode
         namespaces = {namespace_of(pid) for pid in (net.pid(name) for name in net.names)}
-    found["left"] = [pid for pid in _pids() if _namespace(pid) in namespaces]
+
+    def left() -> list[int]:
+        return [pid for pid in _pids() if _namespace(pid) in namespaces]
+
+    wait_for(lambda: not left(), 5)  # a process SIGKILLed with its parent may take a moment to go
+    found["left"] = left()
     found["links added"] = host_links() - before
     found["check"] = subprocess.run(bearcat("check", str(out)), capture_output=True, text=True)
     return found

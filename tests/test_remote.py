@@ -116,9 +116,9 @@ def test_a_phone_is_told_the_address_of_the_field_network_not_the_loopback():
 
 def test_who_joined_from_where_is_said_once_per_name_and_address():
     links = [
-        Link("a1", "tls/192.168.1.20:40112", ("wlan0",), "q1"),
-        Link("a2", "tls/127.0.0.1:40113", ("lo",), "gs"),  # on this machine
-        Link("a3", "tcp/192.168.1.21:40114", (), None),
+        Link("tls/192.168.1.20:40112", ("wlan0",), "q1"),
+        Link("tls/127.0.0.1:40113", ("lo",), "gs"),  # on this machine
+        Link("tcp/192.168.1.21:40114", (), None),
     ]
     seen: set = set()
     found = remote.arrivals(links, seen)
@@ -126,7 +126,7 @@ def test_who_joined_from_where_is_said_once_per_name_and_address():
         "q1 joined from 192.168.1.20 on wlan0",
         "a peer (an unsecured link does not say who) joined from 192.168.1.21",
     ]
-    again = [Link("a4", "tls/192.168.1.20:40200", ("wlan0",), "q1")]  # its fetch, then its session
+    again = [Link("tls/192.168.1.20:40200", ("wlan0",), "q1")]  # its fetch, then its session
     assert remote.arrivals(again, seen) == []
 
 

@@ -33,8 +33,12 @@ silently.
 
 A session is a context manager, as zenoh's own are (``with ZenohSession(...)
 as session:``), so whoever opens one closes it on every path out. Opening one
-that cannot reach its endpoints (a client whose router is not there) raises
-a ``BusError`` that names them.
+that cannot reach its endpoints (a client whose router is not there, or
+whose TLS handshake fails) raises a ``BusError`` that names them and says
+why (``bus.probe``); one that cannot listen where it is told names the
+endpoint and the reason. ``links()`` says where each session linked to
+this one came from, and on ``tls/`` whose certificate it presented (the
+launcher's report of who joined from where).
 """
 
 from __future__ import annotations
@@ -57,6 +61,7 @@ from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials, Refusal
 from bearcat.bus.inprocess import Callback, LivelinessCallback
 from bearcat.bus.policy import may_publish
+from bearcat.bus.probe import why_unreachable
 
 log = logging.getLogger(__name__)
 
@@ -114,12 +119,10 @@ def config(
 
 @dataclass(frozen=True)
 class Link:
-    """A link of a session to another: who (``peer``, its Zenoh id), from
-    where (``remote``, the endpoint of the other end), in on which
-    ``interfaces``, and on ``tls/`` the common name of the certificate the
-    other end presented."""
+    """A link of a session to another: from where (``remote``, the endpoint
+    of the other end), in on which ``interfaces``, and on ``tls/`` the
+    common name of the certificate the other end presented."""
 
-    peer: str
     remote: str
     interfaces: tuple[str, ...]
     certificate: str | None
@@ -267,7 +270,6 @@ class ZenohSession:
                 link = json.loads(reply.ok.payload.to_string())
                 found.append(
                     Link(
-                        peer=str(reply.ok.key_expr).split("/")[-3],
                         remote=str(link["dst"]),
                         interfaces=tuple(link.get("interfaces") or ()),
                         certificate=link.get("auth_identifier"),
@@ -401,13 +403,18 @@ def _reliabilities(key_expr: str) -> tuple[bool, bool]:
     return reliable, best_effort
 
 
+_LISTEN_ERRORS = {
+    98: "another program listens there already (another bearcat run?)",
+    99: "no interface of this machine has that address (ip address lists them)",
+    13: "a port below 1024 needs root",
+}
+
+
 def _refusal(name: str, zconfig: zenoh.Config, exc: zenoh.ZError) -> str:
     """Why zenoh would not open session ``name``, as one sentence naming the endpoints."""
     text = re.sub(r"\s*at /\S+\.rs:\d+\.?", "", str(exc)).strip()
     connect = _setting(zconfig, "connect/endpoints") or []
     if text.startswith("Unable to connect") and connect:
-        from bearcat.bus.probe import why_unreachable
-
         tls = _setting(zconfig, "transport/link/tls") or {}
         ca, cert, key = (
             str(tls.get(k) or "") for k in ("root_ca_certificate", "connect_certificate", "connect_private_key")
@@ -417,7 +424,7 @@ def _refusal(name: str, zconfig: zenoh.Config, exc: zenoh.ZError) -> str:
         return f"session {name!r} could not connect to {'; nor to '.join(reasons)}"
     if text.startswith("No peer specified"):
         return f"session {name!r} is a client with no endpoint to connect to"
-    listener = re.search(r"listener (?:bound to|on) (\S+?):? .*\((?:os error) (\d+)\)", text)
+    listener = re.search(r"listener (?:bound to|on) (\S+?):? .*\(os error (\d+)\)", text)
     if listener is not None:
         where, errno = listener.group(1), int(listener.group(2))
         listen = _setting(zconfig, "listen/endpoints") or []
@@ -425,13 +432,6 @@ def _refusal(name: str, zconfig: zenoh.Config, exc: zenoh.ZError) -> str:
         why = _LISTEN_ERRORS.get(errno, text.rsplit(": ", 1)[-1])
         return f"session {name!r} cannot listen on {where}: {why}"
     return f"zenoh could not open session {name!r}: {text}"
-
-
-_LISTEN_ERRORS = {
-    98: "another program listens there already (another bearcat run?)",
-    99: "no interface of this machine has that address (ip address lists them)",
-    13: "a port below 1024 needs root",
-}
 
 
 def _setting(zconfig: zenoh.Config, path: str):

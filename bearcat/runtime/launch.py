@@ -13,10 +13,14 @@ supervises: the run ends when the referee says so, when a peer process dies
 run itself if the ground station is the one that died), at the time limit,
 or on Ctrl-C. In every case the launcher then stops every peer it started
 (a stop command, then SIGTERM, then SIGKILL) and leaves no process behind.
-Agents driven from a keyboard, and those a user names to join by hand
-(``joins``: a walker started in another terminal, or a phone's page served
-by a ``bearcat phone`` of the user's own), are not started here: the
-launcher prints the command to run, and waits.
+Agents driven from a keyboard, and the agents and UAVs a user names to
+join by hand (``joins``: a walker started in another terminal, a phone's
+page served by a ``bearcat phone`` of the user's own), are not started
+here: the launcher prints the command to run, and waits. With ``listen``
+the router also takes peers from other machines (``remote``): the
+launcher says where they join, prints the command each runs there (which
+fetches the scenario from the ground station), and, while it waits, who
+joined from where.
 
 The launcher's own session records every message of the game it sees into
 ``events.jsonl``; each peer writes what it sent and received, what its

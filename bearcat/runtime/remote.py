@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from bearcat.bus.endpoints import Endpoint, is_address, is_loopback, parse_endpoint
+from bearcat.bus.endpoints import WILDCARDS, Endpoint, is_address, is_loopback, parse_endpoint
 from bearcat.bus.errors import BusError
 from bearcat.bus.zenoh_session import best_effort_endpoint
 
@@ -107,7 +107,7 @@ def link_host(host: str, listen: tuple[Endpoint, ...]) -> str | None:
     ``host`` itself, unless it is every interface; then the first address
     the router takes other machines at, which is on the field's network;
     None when neither says."""
-    if not Endpoint("tcp", host, 0).wildcard and host:
+    if host not in (*WILDCARDS, ""):
         return host
     return next((e.host for e in listen if not e.wildcard and not is_loopback(e.host)), None)
 

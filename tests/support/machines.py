@@ -9,8 +9,9 @@ other. Every other machine routes through the laptop, so each reaches
 every address of the laptop (``net.address("laptop")`` is its end of the
 first link). ``net.start(name, argv)`` runs a program on a machine.
 
-Each namespace lives while a process is in it: a holder (``unshare --net``
-running ``sleep``), and whatever runs there. Everything is started with the
+Each namespace lives while a process is in it: a holder (``sleep``, which
+``unshare --net`` becomes once the namespace is made), and whatever runs
+there. Everything is started with the
 parent-death signal, and on the way out every process started is killed
 and waited for, so the namespaces, their links and addresses go with them
 and nothing is left in this host's own namespace, which is never touched.
@@ -37,9 +38,7 @@ class Machines:
     def __enter__(self) -> Machines:
         try:
             for name in self.names:
-                holder = subprocess.Popen(
-                    ["unshare", "--net", "--fork", "--kill-child", "sleep", "3600"], preexec_fn=die_with_parent
-                )
+                holder = subprocess.Popen(["unshare", "--net", "sleep", "3600"], preexec_fn=die_with_parent)
                 self.holders[name] = holder
                 await_namespace(holder.pid, f"machine {name}", STARTUP)
                 inside(holder.pid, "ip", "link", "set", "lo", "up")
