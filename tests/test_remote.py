@@ -161,6 +161,7 @@ def test_a_run_refuses_a_listen_endpoint_it_could_not_take_peers_on_in_one_sente
             f"the router's certificate {tmp_path / 'field' / 'launcher.pem'} does not name 127.0.0.2",
         ),
         (["--joins", "q7"], "there is no agent or UAV 'q7' to join by hand"),
+        (["--listen", "tcp/203.0.113.9:7447"], "no interface of this machine has the address 203.0.113.9"),
     ):
         run = _bearcat("run", scenario, "--out", tmp_path / "run", *flags)
         assert run.returncode == 2 and said in run.stderr, run.stderr

@@ -38,6 +38,17 @@ def local_addresses() -> tuple[str, ...]:
     return tuple(dict.fromkeys(found))
 
 
+def is_local(address: str) -> bool:
+    """Whether ``address`` is one of this machine's, which a server can listen on."""
+    family = socket.AF_INET6 if ":" in address else socket.AF_INET
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind((address, 0))
+        except OSError:
+            return False
+    return True
+
+
 def reachable(host: str) -> str:
     """The address a phone or peer on the same network reaches a server
     listening at ``host`` at: ``host`` itself unless it is every interface;

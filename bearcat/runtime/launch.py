@@ -56,7 +56,7 @@ from bearcat.agents.ground_station.event_log import EventLog, read_events
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.access import access_control
-from bearcat.bus.addresses import local_addresses, reachable
+from bearcat.bus.addresses import is_local, local_addresses, reachable
 from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.endpoints import WILDCARDS, Endpoint
@@ -203,6 +203,9 @@ def preflight(
     else:
         members(scenario, phones)  # every phone names an agent
     remote.check_listen(listen, secure=secure)
+    for endpoint in listen:
+        if not endpoint.wildcard and not is_local(endpoint.host):
+            raise BusError(f"--listen {endpoint}: no interface of this machine has the address {endpoint.host}")
     if secure and certs is not None and listen:
         named = hosts_named(certs, LAUNCHER)
         remote.uncovered(listen, local_addresses(), named, str(certs / f"{LAUNCHER}.pem"))
@@ -477,6 +480,8 @@ def _play(
             program = ("bearcat",) if elsewhere else BEARCAT  # another machine's own installation
             guarded = ["--secure"] if secure else []
             uavs = [u.id for u in scenario.uavs]
+            if elsewhere and not by_hand:
+                say("router: no agent or UAV is left for another machine to start; --joins AGENT leaves one")
             for name in (p for p in (*scenario.ids, *uavs) if p in by_hand):
                 role = "uav" if name in uavs else "walker"
                 peer = peer_command(role, ref, name, at, seed, netem, logs, certs, transport, program=program)
