@@ -142,16 +142,16 @@ def field(tmp_path_factory):
         )
         walker, flyer = printed(launcher, found["said"], 2)
         found["commands"] = (walker, flyer)
-        quiet = {"stdout": subprocess.PIPE, "stderr": subprocess.STDOUT, "text": True, "env": env}
+        printing = {"stdout": subprocess.PIPE, "text": True, "env": env}  # what a program prints, not its logs
         net.start("companion", vehicle_command(scenario, 0, 14540), stdout=subprocess.DEVNULL, env=env)
         uav = net.start("companion", [*flyer, "--emulated"], stdout=subprocess.DEVNULL, env=env)
-        person = net.start("companion", walker, **quiet)
+        person = net.start("companion", walker, stderr=subprocess.STDOUT, **printing)
         # While the game waits for them, strangers knock.
         stranger = net.start(
             "stranger",
             [sys.executable, "-c", NO_CERTIFICATE, f"tls/{laptop}:{PORT}", str(certs / "ca.pem")],
             cwd=ROOT,
-            **quiet,
+            **printing,
         )
         found["no certificate"] = stranger.communicate(timeout=60)[0].strip()
         impostor = net.start(
@@ -172,7 +172,7 @@ def field(tmp_path_factory):
             "stranger",
             [sys.executable, "-c", EAVESDROPPER, f"tls/{laptop}:{PORT}", str(certs), "4", *taps],
             cwd=ROOT,
-            **quiet,
+            **printing,
         )
         time.sleep(3.0)
         os.kill(uav.pid, signal.SIGKILL)
