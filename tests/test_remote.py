@@ -171,13 +171,15 @@ def test_a_run_refuses_a_listen_endpoint_it_could_not_take_peers_on_in_one_sente
 
 @pytest.fixture(scope="module")
 def router(tmp_path_factory):
-    """A guarded router on the loopback, listening on every loopback address (127.0.0.2 included)."""
+    """A guarded router on the loopback, at 127.0.0.1 and at 127.0.0.2, which its certificate does not name."""
     base = tmp_path_factory.mktemp("router")
     ours = make_authority(base / "ours", {"launcher": "launcher", "attacker": "walker"})
     port = free_port()
     with ZenohSession(
         "launcher",
-        config(listen=[f"tls/0.0.0.0:{port}"], mode="router", tls=Credentials(ours, "launcher")),
+        config(
+            listen=[f"tls/127.0.0.1:{port}", f"tls/127.0.0.2:{port}"], mode="router", tls=Credentials(ours, "launcher")
+        ),
     ) as session:
         yield base, ours, port, session
 
