@@ -276,7 +276,8 @@ def test_a_client_whose_router_is_not_there_says_so_in_one_sentence(tmp_path, en
     )
     assert done.returncode == 2, done.stderr
     assert done.stderr.splitlines() == [
-        f"bearcat: error: session 'attacker' could not connect to {endpoint}: nothing answered there"
+        f"bearcat: error: session 'attacker' could not connect to {endpoint}: "
+        "nothing answered there (Connection refused)"
     ]
 
 

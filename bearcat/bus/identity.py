@@ -157,6 +157,24 @@ def _leaf(builder: x509.CertificateBuilder, hosts: tuple[str, ...]) -> x509.Cert
     )
 
 
+def hosts_named(directory: Path | str, name: str) -> tuple[str, ...]:
+    """The names and addresses at which the certificate of peer ``name`` in
+    ``directory`` serves TLS (what a ``tls/`` link to it checks the address
+    it connected to against): the loopback and the ``hosts`` it was issued for."""
+    path = Path(directory) / f"{name}.pem"
+    try:
+        cert = x509.load_pem_x509_certificate(path.read_bytes())
+    except FileNotFoundError:
+        raise BusError(f"{directory} holds no certificate for {name!r} ({name}.pem)") from None
+    except ValueError:
+        raise BusError(f"{path} is not a PEM certificate") from None
+    try:
+        names = cert.extensions.get_extension_for_class(x509.SubjectAlternativeName).value
+    except x509.ExtensionNotFound:
+        return ()
+    return tuple(str(n.value) for n in names if isinstance(n, x509.DNSName | x509.IPAddress))
+
+
 def _write(directory: Path, stem: str, cert: x509.Certificate, key: ec.EllipticCurvePrivateKey) -> None:
     _write_key(directory / f"{stem}.key", key)
     (directory / f"{stem}.pem").write_bytes(cert.public_bytes(serialization.Encoding.PEM))

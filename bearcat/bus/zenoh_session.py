@@ -33,8 +33,12 @@ silently.
 
 A session is a context manager, as zenoh's own are (``with ZenohSession(...)
 as session:``), so whoever opens one closes it on every path out. Opening one
-that cannot reach its endpoints (a client whose router is not there) raises
-a ``BusError`` that names them.
+that cannot reach its endpoints (a client whose router is not there, or
+whose TLS handshake fails) raises a ``BusError`` that names them and says
+why (``bus.probe``); one that cannot listen where it is told names the
+endpoint and the reason. ``links()`` says where each session linked to
+this one came from, and on ``tls/`` whose certificate it presented (the
+launcher's report of who joined from where).
 """
 
 from __future__ import annotations
@@ -45,15 +49,19 @@ import re
 import threading
 from collections import Counter
 from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 
 import msgspec
 import zenoh
 
 from bearcat.bus import keys
+from bearcat.bus.endpoints import parse_endpoint
 from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials, Refusal
 from bearcat.bus.inprocess import Callback, LivelinessCallback
 from bearcat.bus.policy import may_publish
+from bearcat.bus.probe import why_unreachable
 
 log = logging.getLogger(__name__)
 
@@ -87,8 +95,7 @@ def config(
     listen = [LOOPBACK_LISTEN] if listen is None else list(listen)
     connect = list(connect or [])
     for endpoint in (*listen, *connect):
-        if not isinstance(endpoint, str) or "/" not in endpoint:
-            raise BusError(f"endpoint {endpoint!r} is not of the form PROTOCOL/ADDRESS, e.g. tcp/127.0.0.1:7447")
+        parse_endpoint(endpoint)
     c = zenoh.Config()
     try:
         c.insert_json5("mode", json.dumps(mode))
@@ -108,6 +115,17 @@ def config(
     except zenoh.ZError as exc:
         raise BusError(f"zenoh rejected the configuration: {exc}") from None
     return c
+
+
+@dataclass(frozen=True)
+class Link:
+    """A link of a session to another: from where (``remote``, the endpoint
+    of the other end), in on which ``interfaces``, and on ``tls/`` the
+    common name of the certificate the other end presented."""
+
+    remote: str
+    interfaces: tuple[str, ...]
+    certificate: str | None
 
 
 Refused = Callable[[str, str, str, str], None]
@@ -241,6 +259,26 @@ class ZenohSession:
                     return payload
         return None
 
+    def links(self, timeout: float = 1.0) -> list[Link]:
+        """The links this session holds to other machines' and processes' sessions, from its own admin space."""
+        self._check_open()
+        found = []
+        for reply in self._session.get(f"@/{self._session.zid()}/session/transport/unicast/*/link/*", timeout=timeout):
+            if reply.ok is None:
+                continue
+            try:
+                link = json.loads(reply.ok.payload.to_string())
+                found.append(
+                    Link(
+                        remote=str(link["dst"]),
+                        interfaces=tuple(link.get("interfaces") or ()),
+                        certificate=link.get("auth_identifier"),
+                    )
+                )
+            except (ValueError, KeyError, TypeError):
+                log.warning("session %s: a link it could not read: %r", self.name, reply.ok.payload.to_bytes()[:200])
+        return found
+
     def alive(self, key_expr: str, timeout: float = 1.0) -> list[str]:
         self._check_open()
         replies = self._session.liveliness().get(key_expr, timeout=timeout)
@@ -365,15 +403,40 @@ def _reliabilities(key_expr: str) -> tuple[bool, bool]:
     return reliable, best_effort
 
 
+_LISTEN_ERRORS = {
+    98: "another program listens there already (another bearcat run?)",
+    99: "no interface of this machine has that address (ip address lists them)",
+    13: "a port below 1024 needs root",
+}
+
+
 def _refusal(name: str, zconfig: zenoh.Config, exc: zenoh.ZError) -> str:
     """Why zenoh would not open session ``name``, as one sentence naming the endpoints."""
     text = re.sub(r"\s*at /\S+\.rs:\d+\.?", "", str(exc)).strip()
-    try:
-        connect = json.loads(zconfig.get_json("connect/endpoints"))
-    except (zenoh.ZError, ValueError):
-        connect = []
+    connect = _setting(zconfig, "connect/endpoints") or []
     if text.startswith("Unable to connect") and connect:
-        return f"session {name!r} could not connect to {' or '.join(connect)}: nothing answered there"
+        tls = _setting(zconfig, "transport/link/tls") or {}
+        ca, cert, key = (
+            str(tls.get(k) or "") for k in ("root_ca_certificate", "connect_certificate", "connect_private_key")
+        )
+        identity = (Path(ca), Path(cert), Path(key)) if ca and cert and key else None
+        reasons = [f"{e}: {why_unreachable(parse_endpoint(e), identity)}" for e in connect]
+        return f"session {name!r} could not connect to {'; nor to '.join(reasons)}"
     if text.startswith("No peer specified"):
         return f"session {name!r} is a client with no endpoint to connect to"
+    listener = re.search(r"listener (?:bound to|on) (\S+?):? .*\(os error (\d+)\)", text)
+    if listener is not None:
+        where, errno = listener.group(1), int(listener.group(2))
+        listen = _setting(zconfig, "listen/endpoints") or []
+        where = next((e for e in listen if e.endswith("/" + where.rpartition("/")[2])), where)
+        why = _LISTEN_ERRORS.get(errno, text.rsplit(": ", 1)[-1])
+        return f"session {name!r} cannot listen on {where}: {why}"
     return f"zenoh could not open session {name!r}: {text}"
+
+
+def _setting(zconfig: zenoh.Config, path: str):
+    """The JSON value at ``path`` of a configuration, None where it has none."""
+    try:
+        return json.loads(zconfig.get_json(path))
+    except (zenoh.ZError, ValueError):
+        return None

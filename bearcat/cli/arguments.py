@@ -85,6 +85,34 @@ def seed(text: str) -> int:
     return value
 
 
+def host(text: str) -> str:
+    """An address or DNS name at which another machine reaches this one (not every interface)."""
+    from bearcat.bus.endpoints import WILDCARDS, check_host
+    from bearcat.bus.errors import BusError
+
+    try:
+        checked = check_host(text)
+    except BusError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+    if checked in WILDCARDS:
+        raise argparse.ArgumentTypeError(
+            f"{text} means every interface, which no peer connects to: name an address of this machine, "
+            "e.g. 192.168.1.10"
+        )
+    return checked
+
+
+def endpoint(text: str):
+    """A Zenoh endpoint ``PROTOCOL/HOST:PORT`` (``bus.endpoints.Endpoint``)."""
+    from bearcat.bus.endpoints import parse_endpoint
+    from bearcat.bus.errors import BusError
+
+    try:
+        return parse_endpoint(text)
+    except BusError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
 def check_seeds(first: int, count: int) -> None:
     """Seeds ``first`` to ``first + count - 1`` must all be seeds."""
     if first + count - 1 > MAX_SEED:

@@ -2,14 +2,18 @@
 
 ``bearcat certs init DIR --scenario S`` makes an authority in DIR (unless
 one is there) and issues a certificate for every peer of the scenario that
-lacks one; run it again for another scenario, or with ``--phone`` for an
-agent a person plays. ``bearcat certs list DIR`` says who holds what.
+lacks one; run it again for another scenario, with ``--phone`` for an
+agent a person plays, or with ``--host`` for an address peers on other
+machines reach the router at (its certificate, ``launcher.pem``, is issued
+again naming it). ``bearcat certs list DIR`` says who holds what, and at
+which names and addresses the router's certificate serves.
 """
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from bearcat.cli import arguments
 from bearcat.cli.arguments import Commands
 
 
@@ -40,18 +44,23 @@ def register(commands: Commands) -> None:
         "--host",
         action="append",
         default=[],
+        type=arguments.host,
         metavar="ADDRESS",
-        help="a name or address the router is reached at besides the loopback, e.g. the field laptop's "
-        "192.168.1.10 (repeatable); every certificate names them",
+        help="an address (or DNS name) peers on other machines reach the router at, e.g. the field laptop's "
+        "192.168.1.10 (repeatable): the router's certificate (launcher.pem) names it, issued again if it lacks it",
     )
     init.set_defaults(run=run_init)
-    listing = actions.add_parser("list", help="who holds a valid certificate in DIR, in which role")
+    listing = actions.add_parser(
+        "list", help="who holds a valid certificate in DIR, in which role, and where the router's names it"
+    )
     listing.add_argument("directory", metavar="DIR", type=Path)
     listing.set_defaults(run=run_list)
 
 
 def run_init(args) -> int:
+    from bearcat.bus.identity import hosts_named
     from bearcat.runtime.credentials import add_to
+    from bearcat.scenarios.faults import LAUNCHER
     from bearcat.scenarios.schema import load_scenario
 
     scenario = load_scenario(args.scenario)
@@ -60,13 +69,16 @@ def run_init(args) -> int:
         print(f"{args.directory / name}.pem  {role} {name}")
     if not issued:
         print(f"{args.directory}: every peer of {scenario.name} holds a certificate already")
+    if args.host:
+        print(f"the router's certificate names {', '.join(hosts_named(args.directory, LAUNCHER))}")
     return 0
 
 
 def run_list(args) -> int:
-    from bearcat.bus.identity import members_of
+    from bearcat.bus.identity import hosts_named, members_of
 
     for name, member in sorted(members_of(args.directory).items()):
         keyed = "key here" if (args.directory / f"{name}.key").exists() else "no key here"
-        print(f"{name:<20} {member.role:<15} {keyed}")
+        reached = f"  (router at {', '.join(hosts_named(args.directory, name))})" if member.role == "launcher" else ""
+        print(f"{name:<20} {member.role:<15} {keyed}{reached}")
     return 0

@@ -21,7 +21,8 @@ def register(commands: Commands) -> None:
     run = commands.add_parser(
         "run",
         description="Start the ground station and one walker peer per agent as processes on this host, wait "
-        "for all of them, start the game, and stop every peer when it ends (or on Ctrl-C, or when a peer dies).",
+        "for all of them (and for those started by hand, here or on other machines), start the game, and stop "
+        "every peer it started when it ends (or on Ctrl-C, or when a peer dies).",
     )
     run.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
     run.add_argument(
@@ -75,9 +76,19 @@ def register(commands: Commands) -> None:
         action="append",
         default=[],
         metavar="AGENT",
-        help="AGENT's peer is started by hand, not by the launcher (repeatable): a walker in another terminal or, "
-        "with --phone AGENT, the page bridge (bearcat phone, e.g. with a certificate of your own); the launcher "
-        "prints the command and waits for it",
+        help="AGENT's peer is started by hand, not by the launcher (repeatable): a walker or UAV in another terminal "
+        "or on another machine (with --listen) or, with --phone AGENT, the page bridge (bearcat phone, e.g. with a "
+        "certificate of your own); the launcher prints the command and waits for it",
+    )
+    run.add_argument(
+        "--listen",
+        action="append",
+        default=[],
+        type=arguments.endpoint,
+        metavar="ENDPOINT",
+        help="the router also takes peers from other machines here (repeatable), e.g. tls/0.0.0.0:7447 or "
+        "tls/192.168.1.10:7447 with --secure, tcp/... without; the launcher prints where they join and the "
+        "command each of --joins runs",
     )
     run.add_argument(
         "--page",
@@ -254,6 +265,8 @@ def run_live(args) -> int:
         certs=args.certs,
         phones=tuple(args.phone),
         joins=tuple(args.joins),
+        listen=tuple(args.listen),
+        page=args.page,
     )
     out = fresh(args.out or Path("runs") / f"{scenario.name}-{seed}")
     make_directory(out, "run directory")
@@ -289,6 +302,7 @@ def run_live(args) -> int:
                 joins=tuple(args.joins),
                 page=args.page,
                 provisional=awaited is not None,
+                listen=tuple(args.listen),
             )
         who = f"{outcome.winner} wins" if outcome.winner else "no winner"
         say(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}")

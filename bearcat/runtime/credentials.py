@@ -16,7 +16,7 @@ from contextlib import contextmanager
 from pathlib import Path
 
 from bearcat.bus.errors import BusError
-from bearcat.bus.identity import AUTHORITY, add_members, make_authority, members_of
+from bearcat.bus.identity import AUTHORITY, add_members, hosts_named, make_authority, members_of
 from bearcat.scenarios.faults import GROUND, LAUNCHER
 from bearcat.scenarios.schema import Scenario
 
@@ -78,7 +78,8 @@ def spend(directory: Path) -> None:
 
 def add_to(directory: Path, scenario: Scenario, phones: tuple[str, ...] = (), hosts: tuple[str, ...] = ()) -> dict:
     """Issue into ``directory`` (making its authority if it has none) a
-    certificate for every peer of ``scenario`` it lacks; which it issued."""
+    certificate for every peer of ``scenario`` it lacks, and the router's
+    (the launcher's) again if it does not name every one of ``hosts``; which it issued."""
     wanted = members(scenario, phones)
     if not (directory / f"{AUTHORITY}.pem").exists():
         make_authority(directory, wanted, hosts=hosts)
@@ -86,4 +87,8 @@ def add_to(directory: Path, scenario: Scenario, phones: tuple[str, ...] = (), ho
     held = members_of(directory)
     missing = {name: role for name, role in wanted.items() if name not in held}
     add_members(directory, missing, hosts=hosts)
+    named = () if LAUNCHER in missing else hosts_named(directory, LAUNCHER)
+    if LAUNCHER not in missing and not set(hosts) <= set(named):
+        add_members(directory, {LAUNCHER: "launcher"}, hosts=(*named, *hosts))
+        missing[LAUNCHER] = "launcher"
     return missing

@@ -13,10 +13,14 @@ supervises: the run ends when the referee says so, when a peer process dies
 run itself if the ground station is the one that died), at the time limit,
 or on Ctrl-C. In every case the launcher then stops every peer it started
 (a stop command, then SIGTERM, then SIGKILL) and leaves no process behind.
-Agents driven from a keyboard, and those a user names to join by hand
-(``joins``: a walker started in another terminal, or a phone's page served
-by a ``bearcat phone`` of the user's own), are not started here: the
-launcher prints the command to run, and waits.
+Agents driven from a keyboard, and the agents and UAVs a user names to
+join by hand (``joins``: a walker started in another terminal, a phone's
+page served by a ``bearcat phone`` of the user's own), are not started
+here: the launcher prints the command to run, and waits. With ``listen``
+the router also takes peers from other machines (``remote``): the
+launcher says where they join, prints the command each runs there (which
+fetches the scenario from the ground station), and, while it waits, who
+joined from where.
 
 The launcher's own session records every message of the game it sees into
 ``events.jsonl``; each peer writes what it sent and received, what its
@@ -52,13 +56,15 @@ from bearcat.agents.ground_station.event_log import EventLog, read_events
 from bearcat.agents.ground_station.rerun_recording import finish_run
 from bearcat.bus import keys
 from bearcat.bus.access import access_control
+from bearcat.bus.addresses import is_local, local_addresses, reachable
 from bearcat.bus.budget import SenderBudget
 from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.endpoints import WILDCARDS, Endpoint
 from bearcat.bus.errors import BusError
-from bearcat.bus.identity import Credentials
+from bearcat.bus.identity import Credentials, hosts_named
 from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
-from bearcat.runtime import processes
+from bearcat.runtime import processes, remote
 from bearcat.runtime.credentials import covering, members, run_authority
 from bearcat.runtime.dispatch import FAILED
 from bearcat.runtime.live_faults import LiveFaults
@@ -74,6 +80,8 @@ ENDING = ("peer ", "vehicle ")  # how the last line of a peer's or a vehicle's l
 STARTUP = 60.0  # s for every peer to come up
 GRACE = 5.0  # s past the time limit before the launcher stops a game itself
 STOP_WAIT = 5.0  # s a peer gets to exit after the stop command, and again after SIGTERM
+LOOK = 0.5  # s between looks at who joined the router from other machines
+VEHICLE = "udpin://0.0.0.0:14540"  # where a UAV peer started by hand listens for its vehicle (PX4 SITL's)
 
 
 @dataclass
@@ -122,12 +130,15 @@ def peer_command(
     endpoint: str,
     seed: int,
     netem: str,
-    out: Path,
+    out: Path | None,
     certs: Path,
     transport: str = "tcp",
+    *,
+    program: tuple[str, ...] = BEARCAT,
 ) -> list[str]:
+    """The command that starts peer ``agent`` in ``role``, writing its logs into run directory ``out`` if given."""
     return [
-        *BEARCAT,
+        *program,
         "peer",
         role,
         "--scenario",
@@ -144,8 +155,7 @@ def peer_command(
         netem,
         "--transport",
         transport,
-        "--out",
-        str(out),
+        *(() if out is None else ("--out", str(out))),
         "--certs",
         str(certs),
     ]
@@ -165,16 +175,18 @@ def preflight(
     certs: Path | None,
     phones: tuple[str, ...],
     joins: tuple[str, ...] = (),
+    listen: tuple[Endpoint, ...] = (),
+    page: tuple[str, int] = ("0.0.0.0", 8443),
 ) -> None:
     """One sentence for what would make a run of ``scenario`` fail, said
     before anything is solved or started."""
     if (why := refusal(plan, "live")) is not None:
         raise FaultError(why)
-    unknown = sorted(set(joins) - set(scenario.ids))
+    peers = [*scenario.ids, *(u.id for u in scenario.uavs)]
+    unknown = sorted(set(joins) - set(peers))
     if unknown:
         raise BusError(
-            f"{scenario.source}: there is no agent {unknown[0]!r} to join by hand; the agents are "
-            f"{', '.join(scenario.ids)}"
+            f"{scenario.source}: there is no agent or UAV {unknown[0]!r} to join by hand; they are {', '.join(peers)}"
         )
     for k, fault in enumerate(plan):
         if fault.kind in PROCESS_KINDS and fault.target in started_by_hand(scenario, joins):
@@ -190,6 +202,15 @@ def preflight(
         covering(certs, scenario, phones)
     else:
         members(scenario, phones)  # every phone names an agent
+    remote.check_listen(listen, secure=secure)
+    for endpoint in listen:
+        if not endpoint.wildcard and not is_local(endpoint.host):
+            raise BusError(f"--listen {endpoint}: no interface of this machine has the address {endpoint.host}")
+    if secure and certs is not None and listen:
+        named = hosts_named(certs, LAUNCHER)
+        remote.uncovered(listen, local_addresses(), named, str(certs / f"{LAUNCHER}.pem"))
+    if set(phones) - set(joins):
+        _link_host(page[0], listen)  # a phone must be told an address it reaches
 
 
 def launch(
@@ -210,6 +231,7 @@ def launch(
     joins: tuple[str, ...] = (),
     page: tuple[str, int] = ("0.0.0.0", 8443),
     provisional: bool = False,
+    listen: tuple[Endpoint, ...] = (),
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
     ``certs`` a directory of certificates for every peer (``bearcat certs
@@ -217,8 +239,10 @@ def launch(
     ``secure`` puts the router on ``tls/`` with mutual TLS and the access
     control list of ``bus.access``; the agents of ``phones`` are played from
     real phones, whose pages are served from ``page`` (host, first port) on;
-    the peers of the agents in ``joins`` are started by hand, not here (see
-    the module's docstring); ``transport`` is how best-effort messages
+    the peers of the agents and UAVs in ``joins`` are started by hand, not
+    here (see the module's docstring), on this machine or, with ``listen``,
+    on others: the router takes their peers on those endpoints too
+    (``runtime.remote``); ``transport`` is how best-effort messages
     travel (default: the scenario's);
     ``network`` "kernel" puts the peers behind a kernel network that impairs
     their packets, "shim" leaves the impairment to each peer's shim;
@@ -227,7 +251,17 @@ def launch(
     scenario's are not cached, and takes those up once solved."""
     plan = scenario.faults if faults is None else tuple(faults)
     transport = transport or scenario.transport
-    preflight(scenario, plan, transport=transport, secure=secure, certs=certs, phones=phones, joins=joins)
+    preflight(
+        scenario,
+        plan,
+        transport=transport,
+        secure=secure,
+        certs=certs,
+        phones=phones,
+        joins=joins,
+        listen=listen,
+        page=page,
+    )
     full = next((f for f in plan if f.kind == "disk-full"), None)
     with SmallDisk(out, full.size) if full is not None else nullcontext() as disk:
         outcome = _play(
@@ -248,6 +282,7 @@ def launch(
             joins=joins,
             page=page,
             provisional=provisional,
+            listen=listen,
         )
     if full is not None:  # the disk is back: say what the full one could not take
         _rewrite_outcome(out, outcome)
@@ -278,6 +313,7 @@ def _play(
     joins,
     page,
     provisional,
+    listen,
 ) -> LiveOutcome:
     """Start the peers, play, stop them; the outcome, written beside what the run recorded if the disk lets it."""
     lease_ms = round(1000 * scenario.lease)
@@ -297,16 +333,20 @@ def _play(
     else:
         places = LocalPeers(port, secure=secure)
     endpoint = places.loopback
+    addresses = local_addresses() if any(e.wildcard for e in listen) else ()
+    given = certs
     # The launcher is the hub: a router every peer joins as a client. A mesh
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
     with (
         places,
-        run_authority(out, scenario, certs, phones=phones, hosts=places.hosts) as certs,
+        run_authority(
+            out, scenario, certs, phones=phones, hosts=(*places.hosts, *remote.hosts(listen, addresses))
+        ) as certs,
         ZenohSession(
             LAUNCHER,
             config(
-                listen=places.listen,
+                listen=[*places.listen, *remote.router_endpoints(listen, secure=secure)],
                 mode="router",
                 lease_ms=lease_ms,
                 tls=Credentials(certs, LAUNCHER) if secure else None,
@@ -319,8 +359,18 @@ def _play(
         for name, pid in places.own_processes().items():
             processes.record(out, name, pid)
         say(places.describe(netem))
+        named = hosts_named(certs, LAUNCHER) if secure and given is not None else None
+        elsewhere = [str(e) for e in remote.reachable_at(listen, addresses, named)]
+        if listen:
+            say(_listening(elsewhere, secure))
         # Where to connect another peer by hand (a keyboard walker, a real phone's bridge).
-        where = {"endpoint": endpoint, "game": scenario.name, "certs": str(certs), "network": places.host_side()}
+        where = {
+            "endpoint": endpoint,
+            "elsewhere": elsewhere,
+            "game": scenario.name,
+            "certs": str(certs),
+            "network": places.host_side(),
+        }
         (out / "endpoint.json").write_text(json.dumps(where) + "\n")
         inbox = Inbox(LAUNCHER)
         budget = SenderBudget()
@@ -410,9 +460,12 @@ def _play(
             how |= {name: server_how for name, (_, server_how) in pages.items()}
             for name in list(how):
                 children[name] = start(name)
+            link_host = _link_host(page[0], listen) if pages else ""
             for name, (server, _) in pages.items():
-                _say_link(name, server, children[name], say)
+                _say_link(name, server, children[name], say, link_host)
             for k, uav in enumerate(scenario.uavs):
+                if uav.id in by_hand:
+                    continue
                 port = free_port(socket.SOCK_DGRAM)
                 how[uav.id] = ("uav", ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"))
                 flyer = children[uav.id] = start(uav.id)
@@ -421,16 +474,35 @@ def _play(
                     flyer, vehicle_command(scenario, k, port), out / "peers" / f"{vehicle}.log"
                 )
                 processes.record(out, vehicle, children[vehicle].pid)
+            # A peer started by hand elsewhere fetches the scenario from the
+            # ground station, and keeps its logs on its own machine.
+            at, ref, logs = (elsewhere[0], f"zenoh:{game}", None) if elsewhere else (endpoint, scenario_ref, out)
+            program = ("bearcat",) if elsewhere else BEARCAT  # another machine's own installation
             guarded = ["--secure"] if secure else []
-            for agent in (a for a in scenario.agents if a.id in by_hand):
-                walker = peer_command("walker", scenario_ref, agent.id, endpoint, seed, netem, out, certs, transport)
-                bridge = [*BEARCAT, "phone", "--connect", endpoint, "--game", game, "--id", agent.id]
-                bridge += ["--certs", str(certs), "--out", str(out)]
-                say(_joining(agent, agent.id in phones, walker + guarded, bridge + guarded))
+            uavs = [u.id for u in scenario.uavs]
+            if elsewhere and not by_hand:
+                say("router: no agent or UAV is left for another machine to start; --joins AGENT leaves one")
+            for name in (p for p in (*scenario.ids, *uavs) if p in by_hand):
+                role = "uav" if name in uavs else "walker"
+                peer = peer_command(role, ref, name, at, seed, netem, logs, certs, transport, program=program)
+                if role == "uav":
+                    peer += ["--vehicle", VEHICLE]
+                bridge = [*program, "phone", "--connect", at, "--game", game, "--id", name, "--certs", str(certs)]
+                bridge += [] if logs is None else ["--out", str(logs)]
+                chosen = bridge if name in phones else peer
+                say(_joining(scenario, name, name in phones, chosen + guarded, certs=certs, elsewhere=bool(elsewhere)))
             deadline = time.monotonic() + (startup if not (by_hand or phones) else 10 * startup)
+            arrived: set[remote.Arrival] = set()
+            look = time.monotonic()
             while True:
                 with lock:
                     missing = sorted(expected - alive)
+                if elsewhere and time.monotonic() >= look:  # who came from other machines, as they come
+                    look = time.monotonic() + LOOK
+                    for arrival in remote.arrivals(session.links(), arrived):
+                        say(f"{game}: {arrival.describe()}")
+                        with lock:
+                            record.note(time.time(), "joined", **vars(arrival))
                 if not missing:
                     break
                 dead = [n for n, p in children.items() if p.poll() is not None]
@@ -487,13 +559,24 @@ def _play(
     return outcome
 
 
-def _joining(agent, phone: bool, walker: list[str], bridge: list[str]) -> str:
-    """What to tell the user who joins ``agent`` by hand: the ``bridge``
-    command that serves its phone's page, or the ``walker`` peer's."""
+def _joining(scenario: Scenario, name: str, phone: bool, command: list[str], *, certs: Path, elsewhere: bool) -> str:
+    """What to tell the user who starts peer ``name`` by hand: the
+    ``command`` that serves its phone's page, or that starts its walker or
+    UAV, in a terminal here or on another machine (``elsewhere``, with its
+    own copy of its certificate from ``certs``)."""
+    notes = []
     if phone:
-        return f"agent {agent.id} plays from a phone whose page you serve; in a terminal, run:\n  " + " ".join(bridge)
-    how = "is driven from a keyboard" if agent.behaviour == "keyboard" else "joins by hand"
-    return f"agent {agent.id} {how}; in a terminal, run:\n  " + " ".join(walker)
+        what = f"agent {name} plays from a phone whose page you serve"
+    elif name in [u.id for u in scenario.uavs]:
+        what = f"UAV {name} flies from its own computer"
+        notes.append(f"--vehicle: its autopilot's MAVLink URL, e.g. {VEHICLE} or serial:///dev/ttyACM0:57600")
+    else:
+        keyboard = scenario.agent(name).behaviour == "keyboard"
+        what = f"agent {name} {'is driven from a keyboard' if keyboard else 'joins by hand'}"
+    if elsewhere:
+        notes.append(f"--certs: the directory on that machine holding ca.pem, {name}.pem and {name}.key from {certs}")
+    where = "on its machine" if elsewhere else "in a terminal"
+    return f"{what}; {where}, run:\n  " + " ".join(command) + "".join(f"\n  ({note})" for note in notes)
 
 
 def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[str, tuple]:
@@ -514,9 +597,9 @@ def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[st
     return pages
 
 
-def _say_link(name: str, server, peer: subprocess.Popen, say, wait: float = STARTUP) -> None:
-    """Once ``peer`` serves its page, the link to open on the phone and its QR code."""
-    address = "127.0.0.1" if server.host in ("0.0.0.0", "") else server.host
+def _say_link(name: str, server, peer: subprocess.Popen, say, host: str, wait: float = STARTUP) -> None:
+    """Once ``peer`` serves its page, the link to open on the phone (naming ``host``) and its QR code."""
+    address = "127.0.0.1" if server.host in WILDCARDS else server.host
     end = time.monotonic() + wait
     while time.monotonic() < end and peer.poll() is None:
         try:
@@ -526,8 +609,26 @@ def _say_link(name: str, server, peer: subprocess.Popen, say, wait: float = STAR
             time.sleep(0.1)
     else:
         return  # the peer died or never served: the launcher says so in its own words
-    say(f"agent {name} plays from a phone: open {server.url()} on it (the game waits for its first fix)")
-    say(server.qr())
+    say(f"agent {name} plays from a phone: open {server.url(host)} on it (the game waits for its first fix)")
+    say(server.qr(host))
+
+
+def _link_host(host: str, listen: tuple[Endpoint, ...]) -> str:
+    """The address a phone is told to open pages served at ``host`` at:
+    ``host`` itself, unless it is every interface; then the one the router
+    takes other machines at (the field's network), else what this
+    machine's network says (``bus.addresses.reachable``)."""
+    return remote.link_host(host, listen) or reachable(host)
+
+
+def _listening(elsewhere: list[str], secure: bool) -> str:
+    """What the launcher says of the endpoints where peers on other machines join."""
+    if not elsewhere:
+        return "router: takes peers from other machines, but this machine has no address besides the loopback yet"
+    said = "router: peers on other machines join at " + ", ".join(elsewhere)
+    if not secure:
+        said += " (unsecured: whoever reaches it reads every message; --secure guards it)"
+    return said
 
 
 def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:

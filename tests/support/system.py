@@ -35,6 +35,16 @@ def missing_iptables() -> str | None:
     return None
 
 
+def missing_namespaces() -> str | None:
+    """What stands in the way of network namespaces standing in for other computers."""
+    if os.geteuid() != 0:
+        return "needs root for network namespaces and veth pairs (they stand in for other computers): run as root"
+    absent = [tool for tool in ("ip", "unshare", "nsenter") if shutil.which(tool) is None]
+    if absent:
+        return f"needs {', '.join(absent)} for network namespaces: apt-get install iproute2 util-linux"
+    return None
+
+
 def missing_kernel_network() -> str | None:
     """What kernel mode lacks here (root, iproute2, iptables, netfilterqueue), in its own words."""
     from bearcat.netem.kernel.network import missing

@@ -20,7 +20,6 @@ import hmac
 import json
 import logging
 import secrets
-import socket
 import ssl
 import tempfile
 from dataclasses import dataclass
@@ -30,6 +29,8 @@ from pathlib import Path
 from aiohttp import WSMsgType, web
 
 from bearcat.agents.human.page_phone import PagePhone
+from bearcat.bus.addresses import local_addresses, reachable
+from bearcat.bus.endpoints import WILDCARDS
 from bearcat.bus.identity import self_signed
 
 log = logging.getLogger(__name__)
@@ -52,35 +53,22 @@ class PageServer:
     key: Path | None = None
 
     def url(self, address: str | None = None) -> str:
+        """The page's link, naming ``address`` (default: where a phone on the same network reaches ``host``)."""
         return f"https://{address or reachable(self.host)}:{self.port}/?token={self.token}"
 
-    def qr(self) -> str:
+    def qr(self, address: str | None = None) -> str:
         """The link as a QR code for a terminal, to point the phone's camera at."""
         import io
 
         import segno
 
         out = io.StringIO()
-        segno.make(self.url(), error="l").terminal(out=out, compact=True)
+        segno.make(self.url(address), error="l").terminal(out=out, compact=True)
         return out.getvalue()
 
 
 def new_token() -> str:
     return secrets.token_urlsafe(16)
-
-
-def reachable(host: str) -> str:
-    """The address a phone on the same network reaches ``host`` at: ``host``
-    itself unless it is every interface, else the one this machine's default
-    route leaves by (a datagram socket's connect sends nothing)."""
-    if host not in ("0.0.0.0", "", "::"):
-        return host
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
-        try:
-            probe.connect(("10.255.255.255", 1))
-            return probe.getsockname()[0]
-        except OSError:
-            return "127.0.0.1"
 
 
 class Bridge:
@@ -183,6 +171,7 @@ class Bridge:
             return context
         with tempfile.TemporaryDirectory(prefix="bearcat-page-") as held:
             # The phone asks once whether to trust it.
-            cert, key = self_signed(Path(held), "page", "bearcat phone", (reachable(self.server.host),), SESSION)
+            names = local_addresses() if self.server.host in (*WILDCARDS, "") else (self.server.host,)
+            cert, key = self_signed(Path(held), "page", "bearcat phone", names, SESSION)
             context.load_cert_chain(cert, key)
         return context

@@ -7,6 +7,7 @@ import ctypes
 import os
 import signal
 import subprocess
+import time
 
 
 class KernelError(RuntimeError):
@@ -35,6 +36,21 @@ def inside(pid: int, *argv: str) -> str:
 def namespace_of(pid: int | str) -> int:
     """The inode that names the network namespace of process ``pid`` ("self" for this one)."""
     return os.stat(f"/proc/{pid}/ns/net").st_ino
+
+
+def await_namespace(pid: int, name: str, timeout: float) -> None:
+    """Wait until process ``pid`` (``unshare --net``) is in a network
+    namespace of its own; a ``KernelError`` naming ``name`` if it never is."""
+    own = namespace_of("self")
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            if namespace_of(pid) != own:
+                return
+        except FileNotFoundError:
+            break
+        time.sleep(0.005)
+    raise KernelError(f"{name} never got a network namespace of its own (unshare --net failed?)")
 
 
 def die_with_parent() -> None:

@@ -36,7 +36,7 @@ import threading
 import time
 from pathlib import Path
 
-from bearcat.netem.kernel.commands import KernelError, die_with_parent, inside, namespace_of, run
+from bearcat.netem.kernel.commands import KernelError, await_namespace, die_with_parent, inside, run
 
 log = logging.getLogger(__name__)
 
@@ -165,7 +165,7 @@ class KernelNetwork:
             gate, stdin=subprocess.PIPE, stdout=log_file, stderr=subprocess.STDOUT, preexec_fn=die_with_parent
         )
         try:
-            self._wait_for_namespace(child.pid, name)
+            await_namespace(child.pid, f"peer {name}", STARTUP)
             self._held.append(os.open(f"/proc/{child.pid}/ns/net", os.O_RDONLY))
             hub_side, peer_side = self._address(k, 1), self._address(k, 2)
             inside(
@@ -302,18 +302,6 @@ class KernelNetwork:
     def _address(self, link: int, host: int) -> ipaddress.IPv4Address:
         assert self._subnet is not None, "addresses are taken once the subnet is"
         return self._subnet.network_address + 4 * link + host
-
-    def _wait_for_namespace(self, pid: int, name: str) -> None:
-        own = namespace_of("self")
-        end = time.monotonic() + STARTUP
-        while time.monotonic() < end:
-            try:
-                if namespace_of(pid) != own:
-                    return
-            except FileNotFoundError:
-                break
-            time.sleep(0.005)
-        raise KernelError(f"peer {name} never got a network namespace of its own (unshare --net failed?)")
 
     def _ask(self, command: dict) -> dict:
         assert self.hub is not None and self.hub.stdin is not None, "the hub runs, its input a pipe"
