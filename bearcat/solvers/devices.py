@@ -18,8 +18,6 @@ import importlib.util
 import logging
 from dataclasses import dataclass
 
-import numba
-
 from bearcat.solvers.errors import InputError
 
 __all__ = ["DEVICES", "Device", "choose_device", "find_gpu"]
@@ -51,6 +49,8 @@ class Device:
 
     def __str__(self) -> str:
         if self.gpu is None:
+            import numba
+
             return f"the CPU ({numba.get_num_threads()} threads)"
         return self.gpu.name if self.gpu.simulated else f"the GPU {self.gpu.name}"
 

@@ -65,8 +65,9 @@ import numba
 import numpy as np
 from scipy import ndimage
 
+from bearcat.solvers import devices
 from bearcat.solvers import hji_kernels as kern
-from bearcat.solvers.devices import DEVICES, Device, choose_device, find_gpu
+from bearcat.solvers.devices import DEVICES, Device, choose_device
 from bearcat.solvers.errors import InputError, fraction, non_negative, positive
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import lower, table_bytes
@@ -359,8 +360,8 @@ def _device(device: str, local: bool, grid: Grid, ham_args: tuple) -> Device:
         return choose_device(device)
     if local:
         return choose_device(device, unsupported="the narrow band (local) runs on the CPU only")
-    if isinstance(find_gpu(), str) and device == "auto":
-        return choose_device(device)  # no GPU: say so without importing the kernels
+    if isinstance(devices.find_gpu(), str):
+        return choose_device(device)  # no GPU: the CPU, or a refusal, without importing the kernels
     from bearcat.solvers import hji_cuda
 
     return choose_device(device, unsupported=hji_cuda.unsupported(grid.ndim, ham_args))
