@@ -65,7 +65,7 @@ def find_gpu() -> Gpu | str:
         from numba import cuda
         from numba.core import config
 
-        if config.ENABLE_CUDASIM:
+        if getattr(config, "ENABLE_CUDASIM", 0):
             return Gpu("numba's CUDA simulator", simulated=True)
         if not cuda.is_available():
             return "numba-cuda finds no CUDA GPU or driver"

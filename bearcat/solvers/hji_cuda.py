@@ -56,7 +56,7 @@ from numba.core import config
 from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError
 
-SIMULATED = bool(config.ENABLE_CUDASIM)
+SIMULATED = bool(getattr(config, "ENABLE_CUDASIM", 0))
 """Whether numba runs CUDA kernels in its simulator (``NUMBA_ENABLE_CUDASIM=1``)."""
 
 MAX_DIMS = 8
