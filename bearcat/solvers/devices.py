@@ -102,5 +102,5 @@ def choose_device(device: str, *, unsupported: str | None = None) -> Device:
 
 
 def _chosen(device: Device) -> Device:
-    log.info("device auto: solving on %s (%s)", device, device.reason)
+    log.info("device auto: solving on %s: %s", device, device.reason)
     return device

@@ -405,8 +405,13 @@ def unsupported(ndim: int, ham_args: tuple) -> str | None:
 
 
 def free_bytes() -> float:
-    """GPU memory not in use now (infinite in the simulator)."""
-    return float(cuda.current_context().get_memory_info().free)
+    """GPU memory not in use now (infinite in the simulator), once the arrays
+    of earlier solves that numba has yet to free are freed."""
+    context = cuda.current_context()
+    pending = getattr(context, "deallocations", None)
+    if pending is not None:
+        pending.clear()
+    return float(context.get_memory_info().free)
 
 
 class GpuSolve:
