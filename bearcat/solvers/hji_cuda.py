@@ -110,17 +110,21 @@ _entry_time = _device(kern._entry_time)
 
 
 @_helper
-def _along(v, pos, i, o, size, stride, sign):
+def _along(v, pos, i, o, size, stride, sign, scratch):
     """The value ``o`` nodes along an axis from the node at ``pos``, whose
     index along that axis is ``i`` of ``size`` (``stride`` apart); beyond
-    the edge it is made up from the edge, as the CPU's ghosts are."""
+    the edge it is made up from the edge as the CPU's ghosts are, and
+    rounded, through ``scratch``, to the values' precision as a stored
+    ghost is."""
     j = i + o
     if j < 0:
         e = pos - i * stride
-        return _beyond(v[e], v[e + stride], -j, sign)
+        scratch[0] = _beyond(v[e], v[e + stride], -j, sign)
+        return scratch[0]
     if j >= size:
         e = pos + (size - 1 - i) * stride
-        return _beyond(v[e], v[e - stride], j - size + 1, sign)
+        scratch[0] = _beyond(v[e], v[e - stride], j - size + 1, sign)
+        return scratch[0]
     return v[pos + o * stride]
 
 
@@ -180,7 +184,6 @@ def _stage(
     for k in range(ndim):
         n[k], step[k], sign[k], inv[k] = shape[k], strides[k], edge_sign[k], inv_dx[k]
         size *= shape[k]
-    w = 1 if order == 1 else 3
     c = (
         consts[0],
         consts[1],
@@ -199,7 +202,7 @@ def _stage(
     )
     half, zero = consts[14], consts[15]
     idx = cuda.local.array(MAX_DIMS, int64)
-    r = cuda.local.array(7, v.dtype)
+    g = cuda.local.array(1, v.dtype)
     x = cuda.local.array(2, v.dtype)
     pl = cuda.local.array((MAX_DIMS, 1), v.dtype)
     pr = cuda.local.array((MAX_DIMS, 1), v.dtype)
@@ -229,27 +232,36 @@ def _stage(
             idx[k] = rest % n[k]
             rest //= n[k]
             pos += idx[k] * step[k]
+        centre = v[pos]
         for k in range(ndim):
-            st = step[k]
-            if w <= idx[k] < n[k] - w:  # the stencil lies inside the grid
-                for o in range(-w, w + 1):
-                    r[3 + o] = v[pos + o * st]
-            else:
-                for o in range(-w, w + 1):
-                    r[3 + o] = _along(v, pos, idx[k], o, n[k], st, sign[k])
-            h = inv[k]
+            st, i, h = step[k], idx[k], inv[k]
             if order == 1:
-                pl[k, 0] = (r[3] - r[2]) * h
-                pr[k, 0] = (r[4] - r[3]) * h
+                if 0 < i < n[k] - 1:  # both neighbours inside the grid
+                    r2, r4 = v[pos - st], v[pos + st]
+                else:
+                    r2 = _along(v, pos, i, -1, n[k], st, sign[k], g)
+                    r4 = _along(v, pos, i, 1, n[k], st, sign[k], g)
+                pl[k, 0] = (centre - r2) * h
+                pr[k, 0] = (r4 - centre) * h
+                continue
+            if 3 <= i < n[k] - 3:  # the stencil lies inside the grid
+                r0, r1, r2 = v[pos - 3 * st], v[pos - 2 * st], v[pos - st]
+                r4, r5, r6 = v[pos + st], v[pos + 2 * st], v[pos + 3 * st]
             else:
-                d0 = (r[1] - r[0]) * h
-                d1 = (r[2] - r[1]) * h
-                d2 = (r[3] - r[2]) * h
-                d3 = (r[4] - r[3]) * h
-                d4 = (r[5] - r[4]) * h
-                d5 = (r[6] - r[5]) * h
-                pl[k, 0] = _weno5(d0, d1, d2, d3, d4, c)
-                pr[k, 0] = _weno5(d5, d4, d3, d2, d1, c)
+                r0 = _along(v, pos, i, -3, n[k], st, sign[k], g)
+                r1 = _along(v, pos, i, -2, n[k], st, sign[k], g)
+                r2 = _along(v, pos, i, -1, n[k], st, sign[k], g)
+                r4 = _along(v, pos, i, 1, n[k], st, sign[k], g)
+                r5 = _along(v, pos, i, 2, n[k], st, sign[k], g)
+                r6 = _along(v, pos, i, 3, n[k], st, sign[k], g)
+            d0 = (r1 - r0) * h
+            d1 = (r2 - r1) * h
+            d2 = (centre - r2) * h
+            d3 = (r4 - centre) * h
+            d4 = (r5 - r4) * h
+            d5 = (r6 - r5) * h
+            pl[k, 0] = _weno5(d0, d1, d2, d3, d4, c)
+            pr[k, 0] = _weno5(d5, d4, d3, d2, d1, c)
         if kind == kern.SIMPLE_MOTION:
             dv = _simple_motion(
                 idx, pl, pr, half, zero, axis_player, player_sign, speed, speed_offset, speed_stride, spd, norm
@@ -277,7 +289,7 @@ def _stage(
         # Through an array of the value's precision, as the CPU stores them.
         x[0] = dv
         before = u0[pos]
-        x[1] = a * before + b * (v[pos] + dt * x[0])
+        x[1] = a * before + b * (centre + dt * x[0])
         if final:
             if monotone:
                 x[1] = min(x[1], before)
