@@ -51,7 +51,7 @@ class Device:
         if self.gpu is None:
             import numba
 
-            return f"the CPU ({numba.get_num_threads()} threads)"
+            return f"the CPU with {numba.get_num_threads()} threads"
         return self.gpu.name if self.gpu.simulated else f"the GPU {self.gpu.name}"
 
 
