@@ -13,9 +13,9 @@ never picks the simulator, which is no GPU.
 
 from __future__ import annotations
 
-import functools
 import importlib.util
 import logging
+import os
 from dataclasses import dataclass
 
 from bearcat.solvers.errors import InputError
@@ -55,10 +55,21 @@ class Device:
         return self.gpu.name if self.gpu.simulated else f"the GPU {self.gpu.name}"
 
 
-@functools.cache
 def find_gpu() -> Gpu | str:
     """The CUDA GPU numba-cuda would run on (device 0), or a clause saying why
-    there is none. Looked for once per process."""
+    there is none. Looked for once per process: a process forked from one
+    that used the GPU looks again, and CUDA, which does not survive a fork,
+    then says so, and ``"auto"`` takes the CPU there."""
+    pid = os.getpid()
+    if pid not in _found:
+        _found[pid] = _look_for_gpu()
+    return _found[pid]
+
+
+_found: dict[int, Gpu | str] = {}
+
+
+def _look_for_gpu() -> Gpu | str:
     if importlib.util.find_spec("numba_cuda") is None:
         return f"numba-cuda is not installed ({CUDA_EXTRA})"
     try:
