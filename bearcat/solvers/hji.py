@@ -27,7 +27,9 @@ Numerics: WENO5 one-sided derivatives with third-order TVD Runge-Kutta
 ``solvers.hamiltonians``), and a fixed step ``dt = cfl / max_x sum_k
 alpha_k(x) / dx_k``: the dissipation bounds depend on the state only, so the
 step is found once. The schemes are hj_reachability's
-``SolverSettings.with_accuracy("very_high")`` and ``("low")``.
+``SolverSettings.with_accuracy("very_high")`` and ``("low")``. They run on
+the CPU's cores (``hji_kernels``) or on a CUDA GPU (``hji_cuda``), as
+``device`` says (``solvers.devices``).
 
 Grid edges are the edges of the state space, where nobody gains by leaving.
 Values beyond an edge are extrapolated linearly with the edge slope's
