@@ -5,13 +5,16 @@ problem, scheme, grid, CFL number, boundary rule and horizon.
                                         # then the two-stage game at 45^4 and 65^4 with query timings
     python benchmarks/hji.py --quick    # 21^4 over 2 time units, a few seconds per run
     python benchmarks/hji.py --game     # only the two-stage game at 45^4 and 65^4
+    python benchmarks/hji.py --device cuda   # on a CUDA GPU: ours against hj_reachability on the same GPU,
+                                             # the two-stage game at 45^4, 65^4 and 101^4, the kernels' compile
 
 Each of our solves runs twice, on the full grid and by the local band
 (``solve_reach_avoid(local=True)``), with the node updates of each (node
 time steps) beside the seconds, since the machine is shared and noisy; the
 two-stage game ends with the local band's targets, met or not.
 
-Needs ``pip install jax hj-reachability`` (JAX on the CPU). Every solve runs in
+Needs ``pip install jax hj-reachability`` (JAX on the CPU; with ``--device
+cuda``, JAX with CUDA, and ``pip install 'bearcat[cuda]'``). Every solve runs in
 its own process so that its peak resident memory can be read from
 ``getrusage``; both solvers are warmed up inside that process first (numba's
 cache load, JAX's compilation), so the seconds are solving only.
@@ -57,7 +60,7 @@ def problem(n: int):
     return grid, target, avoid
 
 
-def run_ours(n: int, scheme: str, horizon: float, tol: float, local: bool) -> dict:
+def run_ours(n: int, scheme: str, horizon: float, tol: float, local: bool, device: str = "cpu") -> dict:
     from bearcat.solvers.hamiltonians import SimpleMotion
     from bearcat.solvers.hji import solve_reach_avoid
 
@@ -68,8 +71,10 @@ def run_ours(n: int, scheme: str, horizon: float, tol: float, local: bool) -> di
     # monotone clamp (which hj_reachability lacks) is off there; the
     # convergence runs (tol > 0) use the solver's default.
     monotone = tol > 0
-    settings = dict(scheme=scheme, monotone=monotone, local=local)
+    settings = dict(scheme=scheme, monotone=monotone, local=local, device=device)
+    warm = time.perf_counter()
     solve_reach_avoid(small, game, small_target, small_avoid, horizon=0.1, **settings)
+    warm_up = time.perf_counter() - warm
     start = time.perf_counter()
     result = solve_reach_avoid(grid, game, target, avoid, horizon=horizon, tol=tol, **settings)
     seconds = time.perf_counter() - start
@@ -80,6 +85,8 @@ def run_ours(n: int, scheme: str, horizon: float, tol: float, local: bool) -> di
         "time": result.time,
         "converged_at": result.converged_at,
         "set": result.reach_avoid_set,
+        "warm_up": warm_up,
+        "device": result.device,
     }
 
 
@@ -97,6 +104,7 @@ def _hj_edges(sign: float):
 
 def run_hj(n: int, scheme: str, horizon: float) -> dict:
     import hj_reachability as hj
+    import jax
     import jax.numpy as jnp
 
     class Pursuit(hj.ControlAndDisturbanceAffineDynamics):
@@ -135,28 +143,31 @@ def run_hj(n: int, scheme: str, horizon: float) -> dict:
         "time": horizon,
         "converged_at": None,
         "set": final <= 0,
+        "device": f"JAX on {jax.devices()[0].platform}: {jax.devices()[0].device_kind}",
     }
 
 
 GAME_MAP, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON = "field-50", 3.0, 2.5, 60.0
 
 
-def run_game(n: int, local: bool, mask: str) -> dict:
+def run_game(n: int, local: bool, mask: str, device: str = "cpu") -> dict:
     """The two-stage game (R_A, then W_A) on field-50 to convergence, then
     the guidance queries of one ground-station tick on it; W_A saved to
     ``mask``, and the share of the grid near the front measured on the
-    full grid's sets."""
+    full grid's sets (on the CPU only: on a GPU the census would outlast
+    the solve many times over)."""
     from bearcat.maps import load_map
     from bearcat.maps.ctf import ctf_geometry
     from bearcat.solvers.ctf import Rules, solve_ctf
     from bearcat.solvers.ctf_queries import CtfQueries
+    from bearcat.solvers.hji import required_bytes
 
     rules = Rules(GAME_SPEED, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON, GAME_HORIZON)
     game_map = load_map(GAME_MAP)
-    solve_ctf(ctf_geometry(game_map, 9), rules, "both", local=local)  # load the compiled kernels
+    solve_ctf(ctf_geometry(game_map, 9), rules, "both", local=local, device=device)  # load the compiled kernels
     geometry = ctf_geometry(game_map, n)
     start = time.perf_counter()
-    solution = solve_ctf(geometry, rules, "both", local=local)
+    solution = solve_ctf(geometry, rules, "both", local=local, device=device)
     seconds = time.perf_counter() - start
     queries = CtfQueries(solution)
     rng = np.random.default_rng(0)
@@ -185,11 +196,14 @@ def run_game(n: int, local: bool, mask: str) -> dict:
                 "converged_at": s.converged_at,
                 "steps": s.steps,
                 "wins": float(s.attacker_wins.mean()),
-                "near_front": None if local else band_census(s.time_to_win, s.time),
+                "near_front": None if local or device != "cpu" else band_census(s.time_to_win, s.time),
             }
             for name, s in solution.sets.items()
         },
         "query_ms": {key: float(np.median(v)) for key, v in timings.items()},
+        "device": solution.sets["win"].device,
+        "solver_gb": required_bytes(geometry.joint_grid(), record_tstar=True, record_gradient=False) / 1e9,
+        "set_mb": 2 * geometry.joint_grid().size * 4 / 1e6,
     }
 
 
@@ -225,10 +239,13 @@ def band_census(tstar: np.ndarray, horizon: float, samples: int = 16) -> dict:
 
 def child(args) -> None:
     if args.solver == "game":
-        print(json.dumps(run_game(args.n, args.local, args.mask)))
+        print(json.dumps(run_game(args.n, args.local, args.mask, args.device)))
+        return
+    if args.solver == "compile":
+        print(json.dumps(run_compile()))
         return
     if args.solver == "ours":
-        out = run_ours(args.n, args.scheme, args.horizon, args.tol, args.local)
+        out = run_ours(args.n, args.scheme, args.horizon, args.tol, args.local, args.device)
     else:
         out = run_hj(args.n, args.scheme, args.horizon)
     np.save(args.mask, out.pop("set"))
@@ -236,7 +253,17 @@ def child(args) -> None:
     print(json.dumps(out))
 
 
-def measure(solver: str, n: int, scheme: str, horizon: float, tol: float, mask: str, local: bool = False) -> dict:
+def measure(
+    solver: str,
+    n: int,
+    scheme: str,
+    horizon: float,
+    tol: float,
+    mask: str,
+    local: bool = False,
+    device: str = "cpu",
+    env: dict | None = None,
+) -> dict:
     cmd = [
         sys.executable,
         __file__,
@@ -252,9 +279,12 @@ def measure(solver: str, n: int, scheme: str, horizon: float, tol: float, mask: 
         str(tol),
         "--mask",
         mask,
+        "--device",
+        device,
         *(["--local"] if local else []),
     ]
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")])))
+    env = dict(os.environ if env is None else env)
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [ROOT, os.environ.get("PYTHONPATH")]))
     done = subprocess.run(cmd, capture_output=True, text=True, env=env, check=False)
     if done.returncode != 0:
         raise SystemExit(f"{solver} {scheme} n={n} failed:\n{done.stderr}")
@@ -282,7 +312,13 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     parser.add_argument("--quick", action="store_true", help="21^4 over 2 time units")
     parser.add_argument("--game", action="store_true", help="only the two-stage capture-the-flag game")
-    parser.add_argument("--child", choices=("ours", "hj", "game"), dest="solver", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--device",
+        choices=("cpu", "cuda"),
+        default="cpu",
+        help="cpu (default): ours on every core against hj_reachability on the CPU; cuda: both on this machine's GPU",
+    )
+    parser.add_argument("--child", choices=("ours", "hj", "game", "compile"), dest="solver", help=argparse.SUPPRESS)
     parser.add_argument("--n", type=int, default=45, help=argparse.SUPPRESS)
     parser.add_argument("--scheme", default="weno5", help=argparse.SUPPRESS)
     parser.add_argument("--horizon", type=float, default=6.0, help=argparse.SUPPRESS)
@@ -292,6 +328,9 @@ def main() -> None:
     args = parser.parse_args()
     if args.solver:
         child(args)
+        return
+    if args.device == "cuda":
+        on_the_gpu(args.quick, args.game)
         return
 
     if not args.game:
@@ -422,6 +461,119 @@ def print_targets(runs: dict) -> None:
     print("targets of the local band on the two-stage game:")
     for what, target, measured, met in checks:
         print(f"  {what:<24} {target:<14} measured {measured:>9}: {'met' if met else 'not met'}")
+
+
+# --- on a GPU ---
+
+# The targets of the CUDA backend (issue 34).
+GPU_TARGET_RATIO = 10.0  # the flag return at 45^4, horizon 6: times faster than hj_reachability on the same GPU
+GPU_TARGET_GAME_S = {45: 0.5, 65: 2.0, 101: 20.0}  # the two-stage game to convergence
+GPU_TARGET_COMPILE_S = 15.0  # the kernels' first compile
+
+
+def gpu_or_refusal() -> str:
+    """The GPU's name, or exit with one sentence saying why none will do."""
+    from bearcat.solvers.devices import choose_device
+    from bearcat.solvers.errors import InputError
+
+    try:
+        chosen = choose_device("cuda")
+    except InputError as exc:
+        raise SystemExit(f"benchmarks/hji.py --device cuda: {exc}") from None
+    if chosen.gpu is None or chosen.gpu.simulated:
+        raise SystemExit(
+            "benchmarks/hji.py --device cuda: numba's CUDA simulator is on (NUMBA_ENABLE_CUDASIM), and its timings "
+            "mean nothing; unset it on a machine with a GPU"
+        )
+    return chosen.gpu.name
+
+
+def run_compile() -> dict:
+    """Seconds of the first CUDA solve in this process, on a 9^4 grid: the
+    kernels' compile if numba's cache is empty, their load if not."""
+    from bearcat.solvers.hamiltonians import SimpleMotion
+    from bearcat.solvers.hji import solve_reach_avoid
+
+    grid, target, avoid = problem(9)
+    game = SimpleMotion.pursuit(1.0, 1.0)
+    start = time.perf_counter()
+    for scheme in ("first", "weno5"):
+        solve_reach_avoid(grid, game, target, avoid, horizon=0.1, scheme=scheme, device="cuda")
+    return {"seconds": time.perf_counter() - start}
+
+
+def compile_times(tmp: str) -> tuple[float, float]:
+    """The kernels' first compile, into an empty numba cache, and their load
+    from that cache in a second process; each includes the CPU kernels that
+    a solve also runs (the ghost fill), so each is an upper bound."""
+    env = dict(os.environ, NUMBA_CACHE_DIR=os.path.join(tmp, "numba-cache"))
+    first = measure("compile", 9, "weno5", 0.1, 0.0, os.path.join(tmp, "unused.npy"), env=env)
+    again = measure("compile", 9, "weno5", 0.1, 0.0, os.path.join(tmp, "unused.npy"), env=env)
+    return first["seconds"], again["seconds"]
+
+
+def on_the_gpu(quick: bool, game_only: bool) -> None:
+    """Ours on the GPU against hj_reachability on the same GPU, the
+    two-stage game, the compile, then the targets."""
+    name = gpu_or_refusal()
+    n, horizon = (21, 2.0) if quick else (45, 6.0)
+    print(f"on {name}: ours (numba-cuda) and hj_reachability (JAX) on the same GPU, float32, CFL 0.75")
+    checks = []
+    with tempfile.TemporaryDirectory() as tmp:
+        compiled, cached = compile_times(tmp)
+        print(f"kernels' first compile {compiled:.1f} s (an empty cache), then {cached:.1f} s from the cache")
+        checks.append(
+            ("first compile", f"< {GPU_TARGET_COMPILE_S:g} s", f"{compiled:.1f} s", compiled < GPU_TARGET_COMPILE_S)
+        )
+        if not game_only:
+            print(
+                f"{'flag return':<26} {'grid':>5} {'horizon':>7} {'steps':>5} {'seconds':>8} {'ns/upd':>7} "
+                f"{'ratio':>6} {'disagree':>9}  device"
+            )
+            for scheme in ("first", "weno5"):
+                masks = {key: os.path.join(tmp, f"{key}.npy") for key in ("hj", "ours")}
+                theirs = measure("hj", n, scheme, horizon, 0.0, masks["hj"])
+                ours = measure("ours", n, scheme, horizon, 0.0, masks["ours"], device="cuda")
+                disagree = float(np.mean(np.load(masks["hj"]) != np.load(masks["ours"])))
+                ratio = theirs["seconds"] / ours["seconds"]
+                for label, r in (("hj_reachability", theirs), ("bearcat", ours)):
+                    ns = r["seconds"] / (r["steps"] * n**4) * 1e9
+                    print(
+                        f"{label + ' ' + scheme:<26} {n:>3}^4 {horizon:>7g} {r['steps']:>5} {r['seconds']:>8.3f} "
+                        f"{ns:>7.2f} {ratio if label == 'bearcat' else 1.0:>5.1f}x {disagree:>9.2e}  {r['device']}",
+                        flush=True,
+                    )
+                if not theirs["device"].startswith("JAX on gpu"):
+                    print(f"  hj_reachability ran on {theirs['device']}, not the GPU: install JAX with CUDA to compare")
+                elif scheme == "weno5" and not quick:
+                    met = ratio >= GPU_TARGET_RATIO
+                    checks.append(("flag return at 45^4", f">= {GPU_TARGET_RATIO:g}x hj", f"{ratio:.1f}x", met))
+        print(
+            f"{'two-stage game':<26} {'grid':>5} {'seconds':>8} {'R_A conv':>8} {'W_A conv':>8} {'GPU GB':>7} "
+            f"{'set MB':>7}  device"
+        )
+        for n_game in (21,) if quick else (45, 65, 101):
+            r = measure("game", n_game, "weno5", 0.0, 0.0, os.path.join(tmp, "win.npy"), device="cuda")
+            conv = [r["sets"][k]["converged_at"] for k in ("return", "win")]
+            print(
+                f"{'bearcat weno5':<26} {n_game:>3}^4 {r['seconds']:>8.2f} "
+                + " ".join(f"{c:>8.1f}" if c else f"{'-':>8}" for c in conv)
+                + f" {r['solver_gb']:>7.2f} {r['set_mb']:>7.0f}  {r['device']}",
+                flush=True,
+            )
+            if n_game in GPU_TARGET_GAME_S:
+                target = GPU_TARGET_GAME_S[n_game]
+                checks.append(
+                    (f"two-stage game at {n_game}^4", f"< {target:g} s", f"{r['seconds']:.2f} s", r["seconds"] < target)
+                )
+    print(
+        "ns/upd: nanoseconds per node update; ratio: hj_reachability's seconds over ours; disagree: the share of "
+        "nodes whose membership differs from hj_reachability's; GPU GB: the arrays a solve keeps on the GPU "
+        "(values, snapshot, target, avoid, T*); set MB: one solved set's value and T* on the host"
+    )
+    print("targets of the CUDA backend:")
+    for what, target, measured, met in checks:
+        print(f"  {what:<26} {target:<14} measured {measured:>9}: {'met' if met else 'not met'}")
 
 
 if __name__ == "__main__":

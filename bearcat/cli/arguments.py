@@ -133,6 +133,20 @@ def add_batch_options(parser: argparse.ArgumentParser, what: str) -> None:
     )
 
 
+def add_device_option(parser) -> None:
+    """``--device``, where a level-set solve runs (``solvers.devices``), for
+    every command that may solve one."""
+    from bearcat.solvers.devices import DEVICES
+
+    parser.add_argument(
+        "--device",
+        choices=DEVICES,
+        default="auto",
+        help="where sets are solved: cpu; cuda, a CUDA GPU (pip install 'bearcat[cuda]'); auto (default), a GPU "
+        "when numba-cuda finds one, else the CPU. The sets are the same, and cached alike",
+    )
+
+
 class Commands:
     """The sub-commands the command modules register into: ``add_parser`` as
     argparse's, and ``games(command)`` for the GAME choices of a command

@@ -98,6 +98,7 @@ def add_game_options(parser: argparse.ArgumentParser) -> None:
         metavar="CELLS",
         help=f"convergence tolerance in cells (default {DEFAULT_TOL})",
     )
+    arguments.add_device_option(game)
     game.add_argument("--no-cache", action="store_true", help="solve afresh and store nothing")
 
 
@@ -229,7 +230,7 @@ def game_from_args(args) -> CtfGame:
             f"map {game_map.name} are {coarse[0]:.2f} m; use --grid {coarse[1]} or more, or a larger --capture-radius"
         )
     local = getattr(args, "local", False)  # only `solve ctf` offers it: guidance shows the full grid's margins
-    return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol, local=local)
+    return CtfGame(game_map, args.grid, rules, scheme=args.scheme, tol=args.tol, local=local, device=args.device)
 
 
 def solve_game(args) -> tuple[CtfGame, Solved, float]:
@@ -265,6 +266,7 @@ def set_summary(game: CtfGame, solved: Solved) -> list[dict]:
                 "horizon_s": game.rules.return_time if name == "return" else game.rules.capture_time,
                 "steps": found.steps,
                 "node_updates": found.node_updates,
+                "device": found.device,
                 # A local solve's margins stop at its ceiling, the value's largest.
                 "margin_ceiling_m": round(float(found.value.max()), 3) if game.local else None,
                 "source": solved.sources[name],
@@ -290,11 +292,11 @@ def run_solve(args) -> int:
         elif row["converged"]:
             how = (
                 f"converged at {row['converged_at_s']:.1f} s of game time, {row['steps']} steps, "
-                f"{row['node_updates']:,} node updates"
+                f"{row['node_updates']:,} node updates on {row['device']}"
             )
         else:
             how = (
-                f"still changing at {row['horizon_s']:g} s ({row['steps']} steps): this is the "
+                f"still changing at {row['horizon_s']:g} s ({row['steps']} steps on {row['device']}): this is the "
                 f"{row['horizon_s']:g} s game; longer stage times approach the unlimited one"
             )
         if row["margin_ceiling_m"] is not None:

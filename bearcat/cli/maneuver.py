@@ -48,6 +48,7 @@ def _maneuver_options(parser: argparse.ArgumentParser) -> None:
         "as a worst-case torque)",
     )
     parser.add_argument("--scheme", choices=tuple(SCHEMES), default="weno5", help="the HJI scheme (default weno5)")
+    arguments.add_device_option(parser)
     parser.add_argument("--no-cache", action="store_true", help="solve afresh and store nothing")
 
 
@@ -192,7 +193,9 @@ def _design(args) -> tuple[Maneuver, BackflipSets, str, float]:
     started = time.perf_counter()
     try:
         with writing(cache_root(), "cache directory"):
-            sets, source = load_or_design(maneuver, scheme=args.scheme, use_cache=not args.no_cache, progress=progress)
+            sets, source = load_or_design(
+                maneuver, scheme=args.scheme, use_cache=not args.no_cache, progress=progress, device=args.device
+            )
     finally:
         progress.close()
     return maneuver, sets, source, time.perf_counter() - started

@@ -259,13 +259,14 @@ class _CtfGame:
             s = self.scenario
             self.awaited = self.awaiting()
             grid = self.table.grid if self.awaited is None else self.awaited.provisional
-            found = load_or_solve(CtfGame(s.map, grid, self.rules), self.table.stages, progress=progress)
+            game = CtfGame(s.map, grid, self.rules, device=self.table.device)
+            found = load_or_solve(game, self.table.stages, progress=progress)
             self._solved = CtfQueries(found.solution)
         return self._solved
 
     def own(self) -> CtfGame:
         """The game on the scenario's own grid."""
-        return CtfGame(self.scenario.map, self.table.grid, self.rules)
+        return CtfGame(self.scenario.map, self.table.grid, self.rules, device=self.table.device)
 
     def awaiting(self) -> AwaitedSets | None:
         """The sets to answer from provisional ones until they are solved, if any."""

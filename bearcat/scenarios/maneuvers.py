@@ -242,14 +242,17 @@ def load_or_design(
     root: Path | None = None,
     use_cache: bool = True,
     progress: SetProgress | None = None,
+    device: str = "auto",
 ) -> tuple[BackflipSets, str]:
-    """The maneuver's sets and where they came from (``"cache"`` or ``"solved"``)."""
+    """The maneuver's sets and where they came from (``"cache"`` or
+    ``"solved"``), solved on ``device`` if not cached (no part of the key:
+    the sets are the same on each)."""
     path = (root or cache_root()) / "maneuver" / f"{maneuver.name}-{set_key(maneuver, scheme)}.npz"
     if use_cache:
         loaded = _load(path, maneuver.design)
         if loaded is not None:
             return loaded, "cache"
-    sets = design(maneuver.design, progress=progress, scheme=scheme)
+    sets = design(maneuver.design, progress=progress, scheme=scheme, device=device)
     if use_cache:
         _store(path, sets)
     return sets, "solved"

@@ -67,6 +67,7 @@ from bearcat.maps import Map, MapError, load_map
 from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
 from bearcat.scenarios.faults import Fault, check_faults
+from bearcat.solvers.devices import DEVICES
 
 Game = Literal["ctf", "reach-avoid", "pursuit"]
 Team = Literal["attacker", "defender", "evader", "pursuer"]
@@ -80,8 +81,10 @@ MAX_CELLS = 2000
 
 if TYPE_CHECKING:
     ProfileName = str  # read from the profiles file: checked when a scenario is read
+    Device = str  # where sets are solved: one of solvers.devices.DEVICES
 else:
     ProfileName = Literal[tuple(load_profiles())]
+    Device = Literal[DEVICES]
 Uncertainty = Literal["none", "worst-case", "calibrated"]
 UNCERTAINTIES: tuple[Uncertainty, ...] = get_args(Uncertainty)
 """How guidance answers for positions the network delivered stale and noisy:
@@ -276,6 +279,9 @@ class CtfRules(_Table, frozen=True):
     capture_time: Horizon | None = None
     return_time: Horizon | None = None
     visibility: Literal["full", "line-of-sight"] = "full"
+    # Where the sets are solved (solvers.devices): "auto" takes a GPU when
+    # numba-cuda finds one; the sets, and their cache entries, are the same.
+    device: Device = "auto"
 
 
 class ReachAvoidRules(_Table, frozen=True):

@@ -167,10 +167,13 @@ class BackflipSets:
         return all(check.holds for check in self.checks)
 
 
-def design(backflip: Backflip, *, progress: SetProgress | None = None, scheme: str = "weno5") -> BackflipSets:
-    """Solve every set of the backflip and check the sequence."""
+def design(
+    backflip: Backflip, *, progress: SetProgress | None = None, scheme: str = "weno5", device: str = "auto"
+) -> BackflipSets:
+    """Solve every set of the backflip and check the sequence, on ``device``
+    (``solve_reach_avoid``'s)."""
     grid = backflip.attitude_grid
-    solver = {"scheme": scheme, "tol": 0.0}
+    solver = {"scheme": scheme, "tol": 0.0, "device": device}
 
     def solved(name, horizon, solve, **kw):
         tick = None if progress is None else (lambda t, change: progress(name, t, horizon, change))

@@ -142,6 +142,7 @@ class SetSolution:
     steps: int
     time_to_win: np.ndarray | None = None
     node_updates: int | None = None  # None when loaded rather than solved
+    device: str | None = None  # what solved it (solvers.devices.Device); None when loaded
 
     @property
     def attacker_wins(self) -> np.ndarray:
@@ -158,6 +159,7 @@ class SetSolution:
             result.steps,
             result.tstar,
             result.node_updates,
+            result.device,
         )
 
 
@@ -210,6 +212,7 @@ def solve_ctf(
     progress: ProgressCallback | None = None,
     memory_limit: int | None = None,
     local: bool = False,
+    device: str = "auto",
 ) -> CtfSolution:
     """Solve the sets of ``stages`` (see ``STAGES``). A set counts as
     converged (thesis 3.3.2) once its value changes by less than ``tol``
@@ -218,7 +221,9 @@ def solve_ctf(
     ``CtfSolution.sets``. ``local`` solves each set by the narrow band
     (``solvers.hji.solve_reach_avoid``): the same sets and T*, with the
     defender's margins clamped a few cells out (``CtfQueries`` says what
-    that leaves of the guidance)."""
+    that leaves of the guidance). ``device`` is where the sets are solved
+    (``"auto"``, ``"cpu"`` or ``"cuda"``, as ``solve_reach_avoid`` takes it);
+    the sets are the same on each."""
     names = _stage_list(stages)
     known = dict(known or {})
     grid = geometry.joint_grid()
@@ -259,6 +264,7 @@ def solve_ctf(
             progress=report,
             memory_limit=limit,
             local=local,
+            device=device,
         )
         del target
         sets[name] = SetSolution.from_result(name, result)

@@ -27,7 +27,9 @@ Numerics: WENO5 one-sided derivatives with third-order TVD Runge-Kutta
 ``solvers.hamiltonians``), and a fixed step ``dt = cfl / max_x sum_k
 alpha_k(x) / dx_k``: the dissipation bounds depend on the state only, so the
 step is found once. The schemes are hj_reachability's
-``SolverSettings.with_accuracy("very_high")`` and ``("low")``.
+``SolverSettings.with_accuracy("very_high")`` and ``("low")``. They run on
+the CPU's cores (``hji_kernels``) or on a CUDA GPU (``hji_cuda``), as
+``device`` says (``solvers.devices``).
 
 Grid edges are the edges of the state space, where nobody gains by leaving.
 Values beyond an edge are extrapolated linearly with the edge slope's
@@ -59,17 +61,23 @@ import os
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
 from scipy import ndimage
 
+from bearcat.solvers import devices
 from bearcat.solvers import hji_kernels as kern
+from bearcat.solvers.devices import DEVICES, Device, choose_device
 from bearcat.solvers.errors import InputError, fraction, non_negative, positive
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hamiltonians import lower, table_bytes
 
-__all__ = ["SCHEMES", "PaddedField", "ReachAvoidResult", "required_bytes", "solve_reach_avoid"]
+if TYPE_CHECKING:
+    from bearcat.solvers.hji_cuda import GpuSolve
+
+__all__ = ["DEVICES", "SCHEMES", "PaddedField", "ReachAvoidResult", "required_bytes", "solve_reach_avoid"]
 
 
 @dataclass(frozen=True)
@@ -115,7 +123,8 @@ class ReachAvoidResult:
     stages): ``grid.size * steps`` on the full grid, less for a ``local``
     solve. ``ceiling`` is None on the full grid; on a local solve, the
     value at which values above the set are clamped (``solve_reach_avoid``
-    says what that leaves right)."""
+    says what that leaves right). ``device`` names what solved it
+    (``solvers.devices.Device``)."""
 
     value: np.ndarray
     converged: bool
@@ -126,6 +135,7 @@ class ReachAvoidResult:
     ceiling: float | None = None
     tstar: np.ndarray | None = None
     tstar_gradient: np.ndarray | None = None
+    device: str = "the CPU"
 
     @property
     def reach_avoid_set(self) -> np.ndarray:
@@ -193,6 +203,7 @@ def solve_reach_avoid(
     progress: Callable[[float, float], None] | None = None,
     memory_limit: int | None = None,
     local: bool = False,
+    device: str = "auto",
 ) -> ReachAvoidResult:
     """The reach-avoid set of ``target`` (``l``, <= 0 inside) avoiding
     ``avoid`` (``g``, <= 0 inside; None for none) within ``horizon``.
@@ -225,7 +236,15 @@ def solve_reach_avoid(
     the set, beyond the band, they are the last the band gave, less deep
     than the full grid's. Regions, polygons, winners, T* and headings
     drawn from T* are right everywhere; headings drawn from the value's
-    gradient outside the set only where the value is below the ceiling."""
+    gradient outside the set only where the value is below the ceiling.
+
+    ``device`` is ``"cpu"``, ``"cuda"`` (the kernels of
+    ``solvers.hji_cuda`` on a GPU, through numba-cuda) or ``"auto"`` (a GPU
+    if numba-cuda finds one and the problem suits it, else the CPU; the
+    choice is logged, and ``ReachAvoidResult.device`` names it). Both solve
+    the same scheme and give the same sets, but for nodes on the front that
+    rounding puts on the other side of zero. The narrow band (``local``)
+    runs on the CPU only; ``"cuda"`` without a GPU is an InputError."""
     if not isinstance(grid, Grid):
         raise InputError(f"grid must be a solvers.grid.Grid, got {type(grid).__name__}")
     sch = _scheme(scheme)
@@ -260,6 +279,7 @@ def solve_reach_avoid(
         _check_finite("avoid", _nodes(avoid))
 
     ham = lower(hamiltonian, grid, dtype)
+    chosen = _device(device, local, grid, ham.args)
     dt_max = cfl / ham.rate if ham.rate > 0 else check_every
 
     target = _padded(target, grid, dtype)
@@ -273,30 +293,40 @@ def solve_reach_avoid(
     if band is not None:
         band.clamp(u, avoid)
     kern.fill_ghosts(u, np.asarray(grid.shape, np.int64), ham.edge_sign)
-    # Copies rather than empty arrays, so no buffer ever holds uninitialised
-    # values that the convergence check would read.
-    buffers = [u] + [u.copy() for _ in range(sch.buffers - 1)]
-    snapshot = u.copy()
-    del u
-    tstar = np.full(grid.size, np.inf, dtype) if record_tstar else np.zeros(0, dtype)
     with_gradient = record_tstar and record_gradient
-    tgrad = np.zeros(grid.size * grid.ndim, dtype) if with_gradient else np.zeros(0, dtype)
-    stepper = _Stepper(grid, sch, dtype, target, avoid, ham.args, record_tstar, tstar, tgrad, monotone)
+    solve: _CpuSolve | GpuSolve
+    if chosen.kind == "cuda":
+        from bearcat.solvers import hji_cuda
+
+        hji_cuda.check_memory(need, str(chosen), grid)
+        solve = hji_cuda.GpuSolve(
+            grid,
+            sch,
+            _SHU_OSHER[sch.stages],
+            dtype,
+            target,
+            avoid,
+            u,
+            ham.args,
+            record_tstar,
+            with_gradient,
+            monotone,
+        )
+    else:
+        solve = _CpuSolve(grid, sch, dtype, target, avoid, u, ham.args, record_tstar, with_gradient, monotone, band)
+    del u
     t, steps, converged_at, updates = 0.0, 0, None, 0
-    with ThreadPoolExecutor(max_workers=stepper.threads) as pool:
+    with solve:
         while t < horizon and converged_at is None:
             window = min(check_every, horizon - t)
             n_steps = max(1, math.ceil(window / dt_max - 1e-9))
             dt = window / n_steps
-            np.copyto(snapshot, buffers[0])
+            solve.mark()
             for k in range(n_steps):
-                if band is not None:
-                    band.rebuild(pool, buffers, stepper)
-                stepper.step(pool, buffers, dt, t + k * dt)
-                updates += stepper.nodes
+                updates += solve.step(dt, t + k * dt)
             steps += n_steps
             t += window
-            change = float(kern.max_abs_difference(buffers[0], snapshot))
+            change = solve.change()
             if math.isnan(change):
                 raise InputError(
                     f"the value function stopped being finite by t = {t:g}: the dynamics are too fast for the "
@@ -307,8 +337,8 @@ def solve_reach_avoid(
             if window >= check_every and change < tol:
                 converged_at = t
 
-    value = buffers[0]
-    del buffers, snapshot, target, avoid, stepper
+    value, tstar, tgrad = solve.result()
+    del solve, target, avoid
     return ReachAvoidResult(
         value=_unpadded(value, grid),
         converged=converged_at is not None,
@@ -317,9 +347,69 @@ def solve_reach_avoid(
         steps=steps,
         node_updates=updates,
         ceiling=None if band is None else band.cap,
-        tstar=tstar.reshape(grid.shape) if record_tstar else None,
-        tstar_gradient=tgrad.reshape(grid.shape + (grid.ndim,)) if with_gradient else None,
+        tstar=None if tstar is None else tstar.reshape(grid.shape),
+        tstar_gradient=None if tgrad is None else tgrad.reshape(grid.shape + (grid.ndim,)),
+        device=str(chosen),
     )
+
+
+def _device(device: str, local: bool, grid: Grid, ham_args: tuple) -> Device:
+    """The device to solve on (``solvers.devices.choose_device``): the CPU
+    for the narrow band, and for a problem the CUDA kernels do not take."""
+    if device not in DEVICES:
+        raise InputError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
+    if device == "cpu":
+        return choose_device(device)
+    if local:
+        return choose_device(device, unsupported="the narrow band (local) runs on the CPU only")
+    if isinstance(devices.find_gpu(), str):
+        return choose_device(device)  # no GPU: the CPU, or a refusal, without importing the kernels
+    from bearcat.solvers import hji_cuda
+
+    return choose_device(device, unsupported=hji_cuda.unsupported(grid.ndim, ham_args))
+
+
+class _CpuSolve:
+    """A solve's arrays in host memory, stepped by the CPU kernels on a pool
+    of threads (and, for a local solve, the narrow band around the front)."""
+
+    def __init__(self, grid, sch, dtype, target, avoid, initial, ham_args, record, with_gradient, monotone, band):
+        # Copies rather than empty arrays, so no buffer ever holds uninitialised
+        # values that the convergence check would read.
+        self.buffers = [initial] + [initial.copy() for _ in range(sch.buffers - 1)]
+        self.snapshot = initial.copy()
+        self.record, self.with_gradient = record, with_gradient
+        self.tstar = np.full(grid.size, np.inf, dtype) if record else np.zeros(0, dtype)
+        self.tgrad = np.zeros(grid.size * grid.ndim, dtype) if with_gradient else np.zeros(0, dtype)
+        self.stepper = _Stepper(grid, sch, dtype, target, avoid, ham_args, record, self.tstar, self.tgrad, monotone)
+        self.band = band
+
+    def __enter__(self) -> _CpuSolve:
+        self.pool = ThreadPoolExecutor(max_workers=self.stepper.threads)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.pool.shutdown()
+
+    def mark(self) -> None:
+        """Take the snapshot the next convergence check compares with."""
+        np.copyto(self.snapshot, self.buffers[0])
+
+    def step(self, dt: float, t: float) -> int:
+        """One time step from time ``t``; the node updates it made."""
+        if self.band is not None:
+            self.band.rebuild(self.pool, self.buffers, self.stepper)
+        self.stepper.step(self.pool, self.buffers, dt, t)
+        return self.stepper.nodes
+
+    def change(self) -> float:
+        """``max |J - snapshot|`` over the padded arrays; NaN if either holds
+        a number that is not finite."""
+        return float(kern.max_abs_difference(self.buffers[0], self.snapshot))
+
+    def result(self) -> tuple[np.ndarray, np.ndarray | None, np.ndarray | None]:
+        """The value (padded), T* and its gradient (None if not recorded)."""
+        return self.buffers[0], self.tstar if self.record else None, self.tgrad if self.with_gradient else None
 
 
 class _Stepper:

@@ -24,6 +24,8 @@ arithmetic node for node.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numba import njit, types
 
@@ -47,7 +49,7 @@ def constants(dtype) -> np.ndarray:
     the loops would turn float32 arithmetic into float64 and halve the
     vector width."""
     return np.array(
-        [13 / 12, 1 / 4, 2, 3, 4, WENO_EPS, 0.1, 0.6, 0.3, 1 / 3, 1 / 6, 7 / 6, 11 / 6, 5 / 6, 0.5], dtype=dtype
+        [13 / 12, 1 / 4, 2, 3, 4, WENO_EPS, 0.1, 0.6, 0.3, 1 / 3, 1 / 6, 7 / 6, 11 / 6, 5 / 6, 0.5, 0], dtype=dtype
     )
 
 
@@ -132,19 +134,21 @@ def _neighbour(v, base, n, i, o, size, stride, w, sign, scratch):
 def _input_extremum(c, kind, a, b, sense):
     """``sense * max over the input set of sense * c.w``: the control's
     minimum (sense -1) or the disturbance's maximum (sense +1) of ``c . w``
-    over a box ``[a, b]`` or a ball of centre ``a`` and radius ``b[0]``."""
+    over a box ``[a, b]`` or a ball of centre ``a`` and radius ``b[0]``.
+    The input's dimension is ``a``'s: ``c`` may be longer (a fixed-size
+    scratch array of the CUDA kernels)."""
     if kind == BOX:
         s = 0.0
-        for i in range(c.shape[0]):
+        for i in range(a.shape[0]):
             s += max(sense * c[i] * a[i], sense * c[i] * b[i])
         return sense * s
     if kind == BALL:
         s = 0.0
         norm = 0.0
-        for i in range(c.shape[0]):
+        for i in range(a.shape[0]):
             s += c[i] * a[i]
             norm += c[i] * c[i]
-        return s + sense * b[0] * np.sqrt(norm)
+        return s + sense * b[0] * math.sqrt(norm)
     return 0.0
 
 
@@ -210,32 +214,43 @@ def fill_ghosts(arr, shape, edge_sign):
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
 def _affine_block(node0, rows, nb, pl, pr, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd, dv):
     """Lax-Friedrichs Hamiltonian of control-affine dynamics over a block
-    (``_block_layout``) whose first node is ``node0``, from the tabulated
-    ``f0``, ``G``, ``K`` and dissipation coefficients (``tabulate``)."""
-    ndim = f0s.shape[1]
+    (``_block_layout``) whose first node is ``node0``."""
     W = nb + 6
     for i in range(rows):
         for jj in range(nb):
             j = i * W + 3 + jj
-            node = node0 + i * nb + jj
-            h = 0.0
-            diss = 0.0
-            for k in range(ndim):
-                p[k] = 0.5 * (pl[k, j] + pr[k, j])
-                h += p[k] * f0s[node, k]
-                diss += alphas[node, k] * (pr[k, j] - pl[k, j])
-            for i_u in range(cu.shape[0]):
-                s = 0.0
-                for k in range(ndim):
-                    s += Gs[node, k, i_u] * p[k]
-                cu[i_u] = s
-            for i_d in range(cd.shape[0]):
-                s = 0.0
-                for k in range(ndim):
-                    s += Ks[node, k, i_d] * p[k]
-                cd[i_d] = s
-            h += _input_extremum(cu, u_kind, u_a, u_b, -1.0) + _input_extremum(cd, d_kind, d_a, d_b, 1.0)
-            dv[j] = h + 0.5 * diss
+            dv[j] = _affine_hamiltonian(
+                pl, pr, j, node0 + i * nb + jj, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd
+            )
+
+
+@njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
+def _affine_hamiltonian(pl, pr, j, node, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, d_kind, d_a, d_b, p, cu, cd):
+    """The Lax-Friedrichs Hamiltonian of control-affine dynamics at grid node
+    ``node`` (in C order), from its left and right derivatives ``pl[k, j]``
+    and ``pr[k, j]``, the tabulated ``f0``, ``G``, ``K`` and dissipation
+    coefficients (``tabulate``) and scratch ``p``, ``cu`` and ``cd`` (at least
+    as long as the state, the control and the disturbance). The CPU stage and
+    the CUDA kernels (``solvers.hji_cuda``) both call it."""
+    ndim = f0s.shape[1]
+    h = 0.0
+    diss = 0.0
+    for k in range(ndim):
+        p[k] = 0.5 * (pl[k, j] + pr[k, j])
+        h += p[k] * f0s[node, k]
+        diss += alphas[node, k] * (pr[k, j] - pl[k, j])
+    for i_u in range(Gs.shape[2]):
+        s = 0.0
+        for k in range(ndim):
+            s += Gs[node, k, i_u] * p[k]
+        cu[i_u] = s
+    for i_d in range(Ks.shape[2]):
+        s = 0.0
+        for k in range(ndim):
+            s += Ks[node, k, i_d] * p[k]
+        cd[i_d] = s
+    h += _input_extremum(cu, u_kind, u_a, u_b, -1.0) + _input_extremum(cd, d_kind, d_a, d_b, 1.0)
+    return h + 0.5 * diss
 
 
 @njit(cache=True, fastmath=_FASTMATH, error_model="numpy")
@@ -496,13 +511,20 @@ def _record(o_run, u_run, pl, pr, rows, nb, node0, t_old, dt, tstar, tgrad):
             node = node0 + i * nb + jj
             after = o_run[j]
             if after <= 0 and tstar[node] == np.inf:
-                before = u_run[j]
-                frac = before / (before - after) if before > 0 else 0.0
-                tstar[node] = t_old + frac * dt
+                tstar[node] = _entry_time(u_run[j], after, t_old, dt)
                 if tgrad.shape[0] == 0:
                     continue
                 for k in range(ndim):
                     tgrad[node * ndim + k] = 0.5 * (pl[k, j] + pr[k, j])
+
+
+@njit(cache=True)
+def _entry_time(before, after, t_old, dt):
+    """When a node whose value went from ``before`` to ``after <= 0`` over
+    the step from ``t_old`` to ``t_old + dt`` entered the set, interpolated
+    linearly (``t_old`` if it was in already)."""
+    frac = before / (before - after) if before > 0 else 0.0
+    return t_old + frac * dt
 
 
 @njit(cache=True)

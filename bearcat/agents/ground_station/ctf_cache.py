@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import ast
 import contextlib
+import dataclasses
 import fcntl
 import functools
 import hashlib
@@ -143,6 +144,9 @@ class CtfGame:
     tol: float = DEFAULT_TOL
     dtype: str = "float32"
     local: bool = False
+    # Where a set is solved ("auto", "cpu", "cuda"): the sets are the same on
+    # each, so the device is no part of a game's identity or its cache key.
+    device: str = dataclasses.field(default="auto", compare=False)
 
     def set_key(self, name: str) -> str:
         """The cache key of set ``name`` (``return``, ``capture`` or ``win``)."""
@@ -322,6 +326,7 @@ def _solution(game: CtfGame, stages: str, geometry, known: dict, progress: Progr
         known=known,
         progress=progress,
         local=game.local,
+        device=game.device,
     )
 
 
