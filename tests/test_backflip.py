@@ -17,6 +17,8 @@ from bearcat.solvers.backflip_flight import fly, fly_many, nominal_flight
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.planar_quad import IMPULSE, Quadrotor, planar
 
+pytestmark = pytest.mark.xdist_group("backflip")  # the module's fixtures are built once, in one xdist worker
+
 BUILTIN = (builtin_dir() / "backflip.toml").read_text()
 COARSE_GRIDS = """[grids]
 angle = [-40.0, 400.0, 56]

@@ -30,7 +30,10 @@ from tests.support.live_runs import start_launcher
 from tests.support.scenario_files import write_scenario
 from tests.support.system import CHROMIUM, missing_chromium
 
-pytestmark = pytest.mark.skipif(missing_chromium() is not None, reason=str(missing_chromium()))
+pytestmark = [
+    pytest.mark.skipif(missing_chromium() is not None, reason=str(missing_chromium())),
+    pytest.mark.xdist_group("browser-phone"),  # the module's fixtures are built once, in one xdist worker
+]
 
 HEADING = 330.0  # degrees the phone's top edge points to, through the orientation sensor
 START = (25.0, 22.0)  # the attacker's start in the scenario

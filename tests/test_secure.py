@@ -27,6 +27,8 @@ from tests.support.intruder import Intruder
 from tests.support.live_runs import game_started, start_launcher
 from tests.support.scenario_files import write_scenario
 
+pytestmark = pytest.mark.xdist_group("secure")  # the module's fixtures are built once, in one xdist worker
+
 GAME = "test-game"
 FORGED_FIX = (3.0, 3.0)
 
