@@ -215,6 +215,17 @@ def test_a_study_refuses_guidance_it_does_not_vary_in_one_sentence(capsys):
     assert "the go-no-go study has no such cells; its rates are none" in capsys.readouterr().err
 
 
+def test_the_fake_out_maps_aided_rows_play_without_its_unaided_ones():
+    from bearcat.studies.thesis import study_tasks
+
+    everything = study_tasks("fake-out", 1, 0, ["wifi"])
+    aided = study_tasks("fake-out", 1, 0, ["wifi"], guidance=["plain", "calibrated"])
+    assert len(everything) == 2 * 5 * (4 + 3)  # rates x reactions x (markings + aided guidance)
+    assert len(aided) == 2 * 5 * 2 and {t["scenario"] for t in aided} == {"fake-out-aided-defender"}
+    assert {t["labels"]["guidance"] for t in aided} == {"plain", "calibrated"}
+    assert {t["key"] for t in aided} < {t["key"] for t in everything}
+
+
 def test_a_study_plays_only_the_report_rates_asked_for():
     from bearcat.studies.thesis import study_tasks
 

@@ -115,7 +115,13 @@ def _fake_out_cells() -> tuple[Cell, ...]:
                     "agent.defender.reaction": reaction,
                     "agent.*.fix_rate": rate,
                 }
-                labels = {"defender": f"{guidance} aided", "marking": None, "reaction": reaction, "rate": rate}
+                labels = {
+                    "defender": f"{guidance} aided",
+                    "marking": None,
+                    "reaction": reaction,
+                    "rate": rate,
+                    "guidance": guidance,
+                }
                 cells.append(Cell("fake-out-aided-defender", changes, labels))
     return tuple(cells)
 
@@ -163,12 +169,13 @@ STUDIES = {
 
 def study_cells(study: str, guidance=None) -> tuple[Cell, ...]:
     """The cells of ``study``; with ``guidance`` (names of ``GUIDANCE`` or
-    ``ABLATED``), only those of that guidance (and those that vary no
-    guidance); without, all but the ablations."""
+    ``ABLATED``), only those of that guidance (so the fake-out map's aided
+    rows can be played without its unaided ones); without, all but the
+    ablations."""
     cells = STUDIES[study].cells
     if guidance is None:
         return tuple(c for c in cells if c.labels.get("guidance") not in ABLATED)
-    return tuple(c for c in cells if c.labels.get("guidance", guidance[0]) in guidance)
+    return tuple(c for c in cells if c.labels.get("guidance") in guidance)
 
 
 def study_guidance(study: str) -> list[str]:
