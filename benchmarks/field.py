@@ -164,8 +164,8 @@ def latency(n: int, duration: float, mode: str = "peer", kernel: bool = False, s
     from bearcat.bus.identity import Credentials, make_authority
     from bearcat.bus.zenoh_session import ZenohSession, config
     from bearcat.maps import load_map
-    from bearcat.runtime.launch import free_port
     from bearcat.runtime.live import run_peer
+    from bearcat.runtime.peer_commands import free_port
 
     port = free_port()
     scheme = "tls" if secure else "tcp"

@@ -91,7 +91,7 @@ def through_the_kernel(profile: str, transport: str, seconds: float) -> dict:
     from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
     from bearcat.netem.kernel.network import KernelNetwork
     from bearcat.netem.profiles import load_profile
-    from bearcat.runtime.launch import free_port
+    from bearcat.runtime.peer_commands import free_port
 
     port = free_port()
     lease_ms = round(1000 * load_profile(profile).link.lease)

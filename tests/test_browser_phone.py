@@ -24,7 +24,7 @@ from bearcat.agents.human.page_phone import PagePhone
 from bearcat.bus import keys
 from bearcat.bus.messages import Guidance, Report
 from bearcat.maps import load_map
-from bearcat.runtime.launch import free_port
+from bearcat.runtime.peer_commands import free_port
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import start_launcher
 from tests.support.scenario_files import write_scenario

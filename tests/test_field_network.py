@@ -32,7 +32,7 @@ from bearcat.agents.ground_station.event_log import read_events
 from bearcat.bus import keys
 from bearcat.bus.identity import make_authority
 from bearcat.netem.kernel.commands import namespace_of
-from bearcat.runtime.launch import vehicle_command
+from bearcat.runtime.peer_commands import vehicle_command
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import game_started, wait_for
 from tests.support.machines import Machines

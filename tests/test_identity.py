@@ -19,7 +19,7 @@ from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials, Refusal, make_authority, members_of
 from bearcat.bus.policy import may_publish
 from bearcat.bus.zenoh_session import ZenohSession, config
-from bearcat.runtime.launch import free_port
+from bearcat.runtime.peer_commands import free_port
 
 GAME = "g"
 PEERS = {"gs": "ground-station", "launcher": "launcher", "attacker": "walker", "defender": "phone", "q1": "uav"}

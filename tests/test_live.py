@@ -33,8 +33,9 @@ from bearcat.bus.messages import Fix, GameState
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.netem.profiles import load_profile
 from bearcat.runtime import processes
-from bearcat.runtime.launch import agent_failures, free_port
 from bearcat.runtime.live import run_peer
+from bearcat.runtime.live_run import agent_failures
+from bearcat.runtime.peer_commands import free_port
 from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import load_scenario
 from tests.support.faulty import Faulty

@@ -16,7 +16,7 @@ from bearcat.agents.ground_station.event_log import read_events
 from bearcat.bus import keys
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.runtime.credentials import add_to
-from bearcat.runtime.launch import free_port
+from bearcat.runtime.peer_commands import free_port
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import wait_for
 from tests.support.scenario_files import write_scenario

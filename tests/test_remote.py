@@ -15,7 +15,7 @@ from bearcat.bus.errors import BusError
 from bearcat.bus.identity import Credentials, hosts_named, make_authority
 from bearcat.bus.zenoh_session import Link, ZenohSession, config
 from bearcat.runtime import remote
-from bearcat.runtime.launch import free_port
+from bearcat.runtime.peer_commands import free_port
 from tests.support.scenario_files import write_scenario
 
 

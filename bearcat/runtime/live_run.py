@@ -1,0 +1,501 @@
+"""One live run, from its router being up to its outcome.
+
+``launch`` checks the request, solves what the ground station needs, opens
+the router and the run's record, and hands them to a ``LiveRun``, whose
+steps are methods that can be followed, and tested, one at a time:
+
+- ``start``: the peers the launcher starts itself (the ground station, a
+  walker per agent, a page server per phone, a UAV peer and its vehicle
+  emulator per UAV), and the command for each peer a person starts;
+- ``await_up``: every peer's liveliness token, and who joined from other
+  machines as they come;
+- ``begin``: the fault plan's injector and the start command;
+- ``supervise``: until the referee ends the game, or a peer's death, the
+  time limit or Ctrl-C ends the run;
+- ``stop``: the stop command, then SIGTERM, then SIGKILL, and the outcome,
+  written beside what the run recorded if the disk lets it.
+
+Everything the launcher's session hears of the game is recorded as it
+comes, from the moment the run exists: what a sender sent (within its
+budget), what was refused and why, and whose tokens came and went.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import subprocess
+import threading
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from bearcat.agents.ground_station.event_log import EventLog, read_events
+from bearcat.bus import keys
+from bearcat.bus.addresses import reachable
+from bearcat.bus.budget import SenderBudget
+from bearcat.bus.codec import Inbox, encode
+from bearcat.bus.endpoints import WILDCARDS, Endpoint
+from bearcat.bus.messages import Control, GameState
+from bearcat.bus.zenoh_session import ZenohSession
+from bearcat.runtime import processes, remote
+from bearcat.runtime.dispatch import FAILED
+from bearcat.runtime.live_faults import LiveFaults
+from bearcat.runtime.peer_commands import BEARCAT, VEHICLE, free_port, peer_command, started_by_hand, vehicle_command
+from bearcat.runtime.peers import LocalPeers
+from bearcat.scenarios.faults import GROUND, LAUNCHER
+from bearcat.scenarios.schema import Scenario
+
+log = logging.getLogger(__name__)
+
+STARTUP = 60.0  # s for every peer to come up
+GRACE = 5.0  # s past the time limit before the launcher stops a game itself
+STOP_WAIT = 5.0  # s a peer gets to exit after the stop command, and again after SIGTERM
+LOOK = 0.5  # s between looks at who joined the router from other machines
+
+
+@dataclass
+class LiveOutcome:
+    scenario: str
+    winner: str | None
+    reason: str
+    elapsed: float
+    ended: bool
+    peers: dict[str, int | None] = field(default_factory=dict)  # exit codes
+    failures: dict[str, int] = field(default_factory=dict)  # agent -> exceptions it raised
+    out: str = ""
+    faults: list[dict] = field(default_factory=list)  # each fault applied: its index, kind, peers and time
+
+
+@dataclass(frozen=True)
+class RunSettings:
+    """What a live run was asked for, checked (``launch.preflight``); see
+    ``launch.launch`` for each. ``fill`` takes the small disk's last bytes
+    when a fault fills it; ``plan`` is the fault plan."""
+
+    scenario: Scenario
+    scenario_ref: str
+    out: Path
+    plan: tuple
+    seed: int
+    netem: str
+    transport: str
+    say: Callable[[str], None]
+    startup: float = STARTUP
+    fill: Callable[[], object] | None = None
+    secure: bool = False
+    phones: tuple[str, ...] = ()
+    joins: tuple[str, ...] = ()
+    page: tuple[str, int] = ("0.0.0.0", 8443)
+    provisional: bool = False
+    listen: tuple[Endpoint, ...] = ()
+
+
+class LiveRun:
+    """One run's peers, its router's ``session`` and its ``record``, with the
+    peers started from ``places`` with the certificates in ``certs``;
+    ``elsewhere`` the endpoints where peers on other machines join."""
+
+    def __init__(
+        self,
+        settings: RunSettings,
+        places: LocalPeers,
+        session: ZenohSession,
+        record: EventLog,
+        certs: Path,
+        elsewhere: list[str],
+    ) -> None:
+        self.settings = settings
+        self.places = places
+        self.session = session
+        self.record = record
+        self.certs = certs
+        self.elsewhere = elsewhere
+        scenario = settings.scenario
+        self.game = scenario.name
+        self.by_hand = started_by_hand(scenario, settings.joins)
+        self.expected = {keys.alive(self.game, "referee", "referee"), keys.alive(self.game, "ground-station", GROUND)}
+        self.expected |= {
+            keys.alive(self.game, "phone" if a.id in settings.phones else "walker", a.id) for a in scenario.agents
+        }
+        self.expected |= {keys.alive(self.game, "uav", u.id) for u in scenario.uavs}
+        if scenario.uavs:
+            self.expected.add(keys.alive(self.game, "ground-station", "uav-tasking"))
+        self.children: dict[str, subprocess.Popen] = {}
+        self.how: dict[str, tuple] = {}  # peer -> (role, flags): how to start it again
+        self.injector: LiveFaults | None = None
+        self.started_at: float | None = None
+        self._inbox = Inbox(LAUNCHER)
+        self._budget = SenderBudget()
+        self._final: dict = {}
+        self._alive: set[str] = set()
+        self._lock = threading.Lock()
+        session.on_refused = self._forged
+        session.subscribe(keys.game_wide(self.game), self._seen)
+        session.subscribe_liveliness(keys.every(self.game, "alive"), self._liveliness)
+
+    def play(self) -> LiveOutcome:
+        """Every step in turn; the peers are stopped and the outcome kept however the run ends."""
+        reason = None
+        try:
+            self.start()
+            reason = self.await_up()
+            if reason is None:
+                self.begin()
+                reason = self.supervise()
+        except KeyboardInterrupt:
+            reason = "interrupted"
+        finally:
+            outcome = self.stop(reason)
+        return outcome
+
+    # What the launcher's session hears, from the moment the run exists.
+
+    def _within_budget(self, sender, key, now) -> bool:
+        """Whether what ``sender`` put on ``key`` may cost the record a line (under the lock)."""
+        if self._budget.allow(sender, key, now):
+            return True
+        for (who, where), n in self._budget.news(now).items():
+            self.record.note(now, "over-budget", sender=who, receiver=LAUNCHER, key=where, dropped=n)
+        return False
+
+    def _seen(self, key, payload, sender) -> None:
+        now = time.time()
+        with self._lock:
+            if not self._within_budget(sender, key, now):
+                return
+        message = self._inbox.accept(key, payload)
+        with self._lock:
+            if message is None:
+                self.record.refused(now, sender, LAUNCHER, key, "undecodable or wrong for its key")
+                return
+            self.record.sent(now, sender, key, message)
+            if isinstance(message, GameState) and message.phase == "ended" and "state" not in self._final:
+                self._final["state"] = message
+        if self.injector is not None:
+            self.injector.saw(message, now)
+
+    def _forged(self, key, claimed, category, reason) -> None:
+        now = time.time()
+        with self._lock:
+            if self._within_budget(claimed, key, now):
+                self.record.refused(now, claimed, LAUNCHER, key, f"{category}: {reason}")
+
+    def _liveliness(self, key, up) -> None:
+        with self._lock:
+            (self._alive.add if up else self._alive.discard)(key)
+            self.record.note(time.time(), "alive" if up else "gone", key=key)
+
+    def _ended(self) -> bool:
+        with self._lock:
+            return "state" in self._final
+
+    # The steps.
+
+    def start(self) -> None:
+        """Start the peers that are the launcher's to start, and say how to start the others."""
+        s = self.settings
+        phones = s.phones
+        self.how[GROUND] = (
+            "ground-station",
+            (*(("--judge", "fixes") if phones else ()), *(("--provisional",) if s.provisional else ())),
+        )
+        self.how |= {a.id: ("walker", ()) for a in s.scenario.agents if a.id not in self.by_hand and a.id not in phones}
+        pages = _pages(tuple(p for p in phones if p not in self.by_hand), s.page, s.out)
+        self.how |= {name: server_how for name, (_, server_how) in pages.items()}
+        for name in list(self.how):
+            self.children[name] = self.start_peer(name)
+        link_host = link_host_of(s.page[0], s.listen) if pages else ""
+        for name, (server, _) in pages.items():
+            _say_link(name, server, self.children[name], s.say, link_host)
+        for k, uav in enumerate(s.scenario.uavs):
+            if uav.id not in self.by_hand:
+                self._start_uav(k, uav.id)
+        self._say_who_joins_by_hand()
+
+    def start_peer(self, name: str, *, again: bool = False) -> subprocess.Popen:
+        """Start peer ``name`` as ``how`` says; ``again`` resumes one a fault stopped."""
+        s = self.settings
+        role, extra = self.how[name]
+        if again:
+            extra = (*extra, "--resume")
+
+        def command(at: str) -> list[str]:
+            flags = peer_command(role, s.scenario_ref, name, at, s.seed, s.netem, s.out, self.certs, s.transport)
+            return [*flags, *self.places.peer_flags, *self._run_flags(), *extra]
+
+        # The ground station and the phones' bridges stay on the laptop: a real phone's network is real.
+        colocated = role in ("ground-station", "phone")
+        log_path = s.out / "peers" / f"{name}.log"
+        peer = self.places.start(name, command, log_path, colocated=colocated, again=again)
+        processes.record(s.out, name, peer.pid)
+        return peer
+
+    def _run_flags(self) -> tuple[str, ...]:
+        """What every peer the launcher starts is told of the run: secured, and its fault plan."""
+        flags: tuple[str, ...] = ("--secure",) if self.settings.secure else ()
+        if self.settings.plan:
+            flags += ("--faults", str((self.settings.out / "faults.toml").resolve()))
+        return flags
+
+    def _start_uav(self, k: int, name: str) -> None:
+        """UAV ``k``'s peer, and the vehicle emulator it flies over MAVLink on a free UDP port."""
+        s = self.settings
+        port = free_port(socket.SOCK_DGRAM)
+        self.how[name] = ("uav", ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"))
+        flyer = self.children[name] = self.start_peer(name)
+        vehicle = f"vehicle-{name}"
+        self.children[vehicle] = self.places.start_vehicle(
+            flyer, vehicle_command(s.scenario, k, port), s.out / "peers" / f"{vehicle}.log"
+        )
+        processes.record(s.out, vehicle, self.children[vehicle].pid)
+
+    def _say_who_joins_by_hand(self) -> None:
+        """The command for each peer a person starts. One started elsewhere
+        fetches the scenario from the ground station, keeps its logs on its
+        own machine and runs that machine's own installation."""
+        s = self.settings
+        logs: Path | None
+        program: tuple[str, ...]
+        if self.elsewhere:
+            at, ref, logs, program = self.elsewhere[0], f"zenoh:{self.game}", None, ("bearcat",)
+            if not self.by_hand:
+                s.say("router: no agent or UAV is left for another machine to start; --joins AGENT leaves one")
+        else:
+            at, ref, logs, program = self.places.loopback, s.scenario_ref, s.out, BEARCAT
+        guarded = ["--secure"] if s.secure else []
+        uavs = [u.id for u in s.scenario.uavs]
+        for name in (p for p in (*s.scenario.ids, *uavs) if p in self.by_hand):
+            role = "uav" if name in uavs else "walker"
+            peer = peer_command(role, ref, name, at, s.seed, s.netem, logs, self.certs, s.transport, program=program)
+            if role == "uav":
+                peer += ["--vehicle", VEHICLE]
+            bridge = [*program, "phone", "--connect", at, "--game", self.game, "--id", name, "--certs", str(self.certs)]
+            bridge += [] if logs is None else ["--out", str(logs)]
+            chosen = bridge if name in s.phones else peer
+            s.say(
+                _joining(
+                    s.scenario,
+                    name,
+                    name in s.phones,
+                    chosen + guarded,
+                    certs=self.certs,
+                    elsewhere=bool(self.elsewhere),
+                )
+            )
+
+    def await_up(self) -> str | None:
+        """Wait for every peer's token, saying who joined from other
+        machines as they come; why the run cannot start, if it cannot."""
+        s = self.settings
+        patient = self.by_hand or s.phones  # a person has to start something: give them time
+        deadline = time.monotonic() + (s.startup if not patient else 10 * s.startup)
+        arrived: set[remote.Arrival] = set()
+        look = time.monotonic()
+        while True:
+            with self._lock:
+                missing = sorted(self.expected - self._alive)
+            if self.elsewhere and time.monotonic() >= look:
+                look = time.monotonic() + LOOK
+                for arrival in remote.arrivals(self.session.links(), arrived):
+                    s.say(f"{self.game}: {arrival.describe()}")
+                    with self._lock:
+                        self.record.note(time.time(), "joined", **vars(arrival))
+            if not missing:
+                return None
+            dead = [n for n, p in self.children.items() if p.poll() is not None]
+            if dead:
+                return f"peer {dead[0]} exited with code {self.children[dead[0]].returncode} before the start"
+            if time.monotonic() > deadline:
+                return f"peers not up after {s.startup:g} s: {', '.join(k.rsplit('/', 1)[-1] for k in missing)}"
+            time.sleep(0.05)
+
+    def begin(self) -> None:
+        """Arm the fault plan and send the start command."""
+        s = self.settings
+        if s.plan:
+            self.injector = LiveFaults(
+                s.plan,
+                game=self.game,
+                session=self.session,
+                record=self.record,
+                lock=self._lock,
+                children=self.children,
+                restart=lambda name: self.start_peer(name, again=True),
+                network=getattr(self.places, "network", None),
+                logs=s.out / "peers",
+                fill=s.fill,
+            )
+        begin = Control(t=time.time(), command="start", seq=1)
+        self.places.game_started(begin.t)
+        self.session.put(keys.control(self.game), encode(begin))
+        if self.injector is not None:
+            self.injector.begin(begin.t)
+        self.started_at = time.monotonic()
+        s.say(f"{self.game}: {len(self.expected)} peers up; game started")
+
+    def supervise(self) -> str | None:
+        """Wait for the end of the game; why the launcher had to end it, if it
+        did (a dead walker's forfeit is the referee's to call, once its lease
+        to rejoin has run out; a peer a fault restarts is not dead)."""
+        s = self.settings
+        assert self.started_at is not None, "supervise() follows begin()"
+        limit = s.scenario.time_limit + GRACE
+        logs = s.out / "peers"
+        gone_since = None
+        while True:
+            if self._ended():
+                return None
+            if self.injector is not None:
+                self.injector.respawn()
+            downed = {} if self.injector is None else dict(self.injector.out_of_play)
+            dead = [n for n, p in self.children.items() if p.poll() is not None and not downed.get(n, ("", False))[1]]
+            if dead:
+                if GROUND in dead:
+                    if GROUND in downed:
+                        return f"the ground station is gone: {downed[GROUND][0]}"
+                    return f"the ground station exited with code {self.children[GROUND].returncode}{_why(logs, GROUND)}"
+                gone_since = gone_since or time.monotonic()
+                if time.monotonic() - gone_since > s.scenario.lease + 3.0:
+                    return f"peer {dead[0]} exited with code {self.children[dead[0]].returncode}{_why(logs, dead[0])}"
+            if time.monotonic() - self.started_at > limit:
+                return f"no result within {limit:g} s"
+            time.sleep(0.05)
+
+    def stop(self, reason: str | None) -> LiveOutcome:
+        """Stop every peer the launcher started; the outcome, recorded and written."""
+        s = self.settings
+        if self.injector is not None:
+            self.injector.close()
+        codes = self._stop_all(reason)
+        state = self._final.get("state")
+        outcome = LiveOutcome(
+            scenario=self.game,
+            winner=state.winner if state else None,
+            reason=state.reason if state else (reason or "stopped"),
+            elapsed=state.elapsed
+            if state
+            else (0.0 if self.started_at is None else time.monotonic() - self.started_at),
+            ended=state is not None,
+            peers=codes,
+            failures=agent_failures(s.out / "peers"),
+            out=str(s.out),
+            faults=[] if self.injector is None else self.injector.applied,
+        )
+        self.record.note(time.time(), "outcome", **vars(outcome))
+        _keep(s.out, outcome, self.record, s.say)
+        return outcome
+
+    def _stop_all(self, reason: str | None) -> dict[str, int | None]:
+        """The stop command, then SIGTERM, then SIGKILL, each waited on; each peer's exit code."""
+        children = self.children
+        if not self._ended() and children:
+            try:
+                stop = Control(t=time.time(), command="stop", reason=(reason or "")[:200], seq=2)
+                self.session.put(keys.control(self.game), encode(stop))
+            except Exception:
+                log.exception("could not send the stop command")
+        for signal_name in ("wait", "terminate", "kill"):
+            deadline = time.monotonic() + STOP_WAIT
+            for p in children.values():
+                if p.poll() is None and signal_name != "wait":
+                    getattr(p, signal_name)()
+            while time.monotonic() < deadline and any(p.poll() is None for p in children.values()):
+                time.sleep(0.05)
+            if all(p.poll() is not None for p in children.values()):
+                break
+        return {name: p.poll() for name, p in children.items()}
+
+
+def link_host_of(host: str, listen: tuple[Endpoint, ...]) -> str:
+    """The address a phone is told to open pages served at ``host`` at:
+    ``host`` itself, unless it is every interface; then the one the router
+    takes other machines at (the field's network), else what this
+    machine's network says (``bus.addresses.reachable``)."""
+    return remote.link_host(host, listen) or reachable(host)
+
+
+def _joining(scenario: Scenario, name: str, phone: bool, command: list[str], *, certs: Path, elsewhere: bool) -> str:
+    """What to tell the user who starts peer ``name`` by hand: the
+    ``command`` that serves its phone's page, or that starts its walker or
+    UAV, in a terminal here or on another machine (``elsewhere``, with its
+    own copy of its certificate from ``certs``)."""
+    notes = []
+    if phone:
+        what = f"agent {name} plays from a phone whose page you serve"
+    elif name in [u.id for u in scenario.uavs]:
+        what = f"UAV {name} flies from its own computer"
+        notes.append(f"--vehicle: its autopilot's MAVLink URL, e.g. {VEHICLE} or serial:///dev/ttyACM0:57600")
+    else:
+        keyboard = scenario.agent(name).behaviour == "keyboard"
+        what = f"agent {name} {'is driven from a keyboard' if keyboard else 'joins by hand'}"
+    if elsewhere:
+        notes.append(f"--certs: the directory on that machine holding ca.pem, {name}.pem and {name}.key from {certs}")
+    where = "on its machine" if elsewhere else "in a terminal"
+    return f"{what}; {where}, run:\n  " + " ".join(command) + "".join(f"\n  ({note})" for note in notes)
+
+
+def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[str, tuple]:
+    """For each of ``phones``, its page's server (on successive ports from
+    ``page``, each with a token of its own, kept where only this user reads
+    it) and how to start its peer."""
+    from bearcat.agents.human.browser_bridge import PageServer, new_token
+
+    pages = {}
+    if phones:
+        (out / "phones").mkdir(mode=0o700, exist_ok=True)
+    for k, name in enumerate(phones):
+        server = PageServer(host=page[0], port=page[1] + k, token=new_token())
+        token_file = out / "phones" / f"{name}.token"
+        token_file.touch(mode=0o600)
+        token_file.write_text(server.token + "\n")
+        pages[name] = (server, ("phone", ("--page", f"{server.host}:{server.port}", "--token-file", str(token_file))))
+    return pages
+
+
+def _say_link(name: str, server, peer: subprocess.Popen, say, host: str, wait: float = STARTUP) -> None:
+    """Once ``peer`` serves its page, the link to open on the phone (naming ``host``) and its QR code."""
+    address = "127.0.0.1" if server.host in WILDCARDS else server.host
+    end = time.monotonic() + wait
+    while time.monotonic() < end and peer.poll() is None:
+        try:
+            socket.create_connection((address, server.port), timeout=0.5).close()
+            break
+        except OSError:
+            time.sleep(0.1)
+    else:
+        return  # the peer died or never served: the launcher says so in its own words
+    say(f"agent {name} plays from a phone: open {server.url(host)} on it (the game waits for its first fix)")
+    say(server.qr(host))
+
+
+def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:
+    """Write the outcome; a disk that refuses it gets it said instead, and so do the lines it refused."""
+    text = json.dumps(vars(outcome), indent=2) + "\n"
+    try:
+        (out / "outcome.json").write_text(text)
+    except OSError as exc:
+        say(f"cannot write {out / 'outcome.json'} ({exc.strerror or exc}); the outcome:\n{text}")
+    if record.lost:
+        say(f"{out / 'events.jsonl'}: the disk refused {record.lost} line(s) ({record.failure})")
+
+
+def agent_failures(peers: Path) -> dict[str, int]:
+    """How often each agent raised, from the ``failed`` events of the peers' logs in ``peers``."""
+    counts: Counter[str] = Counter()
+    for path in sorted(peers.glob("*.jsonl")):
+        counts.update(e["agent"] for e in read_events(path) if e["event"] == FAILED)
+    return dict(sorted(counts.items()))
+
+
+def _why(logs: Path, name: str) -> str:
+    """What a peer that exited said of why (``peer NAME: REASON``, its log's last words), as a clause."""
+    try:
+        lines = (logs / f"{name}.log").read_text(errors="replace").splitlines()
+    except OSError:
+        return ""
+    said = next((line for line in reversed(lines) if line.startswith(f"peer {name}: ")), None)
+    return "" if said is None else f" ({said.split(': ', 1)[1][:120]})"
