@@ -177,7 +177,9 @@ def test_a_run_ended_by_ctrl_c_or_by_a_peers_death_leaves_nothing_behind(tmp_pat
         os.killpg(launcher.pid, signal.SIGINT)  # what a terminal sends to its foreground group
     else:
         command = {p: Path(f"/proc/{p}/cmdline").read_text().replace("\0", " ") for p in peers_of(tmp_path)}
-        (walker,) = [p for p, line in command.items() if line.startswith(sys.executable) and "--id defender" in line]
+        (walker,) = [
+            p for p, line in command.items() if line.startswith(sys.executable) and "/peers/defender.spec.json" in line
+        ]
         os.kill(walker, signal.SIGKILL)
     output, _ = launcher.communicate(timeout=120)
     outcome = json.loads((tmp_path / "run" / "outcome.json").read_text())

@@ -54,15 +54,16 @@ def start_run(tmp_path, **kw):
     return start_launcher(path, out), out, path
 
 
-def peers_of(path) -> list[int]:
-    found = subprocess.run(["pgrep", "-f", f"bearcat peer .*--scenario {path}"], capture_output=True, text=True)
+def peers_of(out) -> list[int]:
+    """The processes still running a peer the launcher started for run directory ``out``."""
+    found = subprocess.run(["pgrep", "-f", f"bearcat peer --spec {out}/peers/"], capture_output=True, text=True)
     return [int(p) for p in found.stdout.split()]
 
 
 def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
     from bearcat.suites.checker import check_run
 
-    launcher, out, path = start_run(tmp_path, time_limit=6.0)
+    launcher, out, _path = start_run(tmp_path, time_limit=6.0)
     output, _ = launcher.communicate(timeout=180)
     assert launcher.returncode == 0, output
     findings = {f.name: f.held for f in check_run(out)}
@@ -77,7 +78,7 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
     outcome = json.loads((out / "outcome.json").read_text())
     assert outcome["ended"] and outcome["winner"] in ("attacker", "defender"), outcome
     assert all(code == 0 for code in outcome["peers"].values()), outcome["peers"]
-    assert peers_of(path) == []
+    assert peers_of(out) == []
     events = read_events(out / "events.jsonl")
     kinds = {e["message"]["type"] for e in events if e["event"] == "sent"}
     assert {"fix", "truth", "guidance", "state", "control"} <= kinds
@@ -125,7 +126,7 @@ def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(t
     seconds, and forfeit once the lease it had to rejoin runs out. The
     socket closes with the process, so Zenoh reports the token gone in
     milliseconds; the margin covers a loaded 2-core machine."""
-    launcher, out, path = start_run(
+    launcher, out, _path = start_run(
         tmp_path,
         time_limit=60.0,
         attacker_behaviour="follow-guidance",
@@ -137,9 +138,7 @@ def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(t
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         time.sleep(1.0)
-        (victim,) = [
-            p for p in peers_of(path) if "--id defender" in Path(f"/proc/{p}/cmdline").read_text().replace("\0", " ")
-        ]
+        (victim,) = [p for p in peers_of(out) if "/peers/defender.spec.json" in Path(f"/proc/{p}/cmdline").read_text()]
         killed = time.time()
         os.kill(victim, signal.SIGKILL)
         output, _ = launcher.communicate(timeout=60)
@@ -153,7 +152,7 @@ def test_a_walker_killed_mid_game_is_gone_within_two_seconds_and_ends_the_game(t
     assert gone[0]["t"] - killed < 2.0
     ended = [e for e in events if e.get("message", {}).get("phase") == "ended"]
     assert 3.0 <= ended[0]["t"] - gone[0]["t"] < 3.0 + 2.0  # the lease to rejoin, then the verdict
-    assert peers_of(path) == []
+    assert peers_of(out) == []
 
 
 def test_garbage_on_every_key_is_dropped_and_counted_and_the_game_goes_on(tmp_path):
@@ -283,7 +282,7 @@ def test_a_client_whose_router_is_not_there_says_so_in_one_sentence(tmp_path, en
 
 
 def test_ctrl_c_stops_every_peer(tmp_path):
-    launcher, out, path = start_run(tmp_path, time_limit=60.0, netem="ideal")
+    launcher, out, _path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         launcher.send_signal(signal.SIGINT)
@@ -293,7 +292,7 @@ def test_ctrl_c_stops_every_peer(tmp_path):
             launcher.kill()
     outcome = json.loads((out / "outcome.json").read_text())
     assert "interrupted" in outcome["reason"] or "stopped" in outcome["reason"], outcome
-    assert wait_for(lambda: peers_of(path) == [], 10)
+    assert wait_for(lambda: peers_of(out) == [], 10)
 
 
 def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path):
@@ -301,17 +300,17 @@ def test_peers_die_with_a_launcher_killed_by_sigkill(tmp_path):
     each is started with the parent-death signal."""
     from bearcat.suites.checker import check_run
 
-    launcher, out, path = start_run(tmp_path, time_limit=60.0, netem="ideal")
+    launcher, out, _path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
-        assert len(peers_of(path)) == 3
-        assert sorted(p.pid for p in processes.recorded(out) if processes.running(p)) == sorted(peers_of(path))
+        assert len(peers_of(out)) == 3
+        assert sorted(p.pid for p in processes.recorded(out) if processes.running(p)) == sorted(peers_of(out))
         launcher.kill()
         launcher.communicate(timeout=10)
     finally:
         if launcher.poll() is None:
             launcher.kill()
-    assert wait_for(lambda: peers_of(path) == [], 10)
+    assert wait_for(lambda: peers_of(out) == [], 10)
     # What the launcher recorded outlives it: the checker knows the run's
     # processes, and finds none left once they have finished dying (a killed
     # process drops its command line before it exits).
@@ -640,4 +639,4 @@ def test_a_run_whose_sets_are_not_cached_starts_on_provisional_ones_and_takes_it
     assert taken_up < ended
     assert any(e["t"] > taken_up and "/guidance/" in e["key"] for e in record if e["event"] == "sent")
     assert cached(awaited.game, awaited.stages) is not None
-    assert peers_of(path) == []
+    assert peers_of(out) == []

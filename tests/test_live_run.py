@@ -39,7 +39,7 @@ def a_run(tmp_path, said: list[str]):
 
 def test_a_peer_that_dies_before_the_start_is_named_and_the_outcome_kept(tmp_path):
     said: list[str] = []
-    run, places, session, record = a_run(tmp_path, said)
+    run, _places, session, record = a_run(tmp_path, said)
     with session, closing(record):
         run.children["attacker"] = subprocess.Popen([sys.executable, "-c", "raise SystemExit(3)"])
         assert run.await_up() == "peer attacker exited with code 3 before the start"

@@ -10,6 +10,7 @@ from bearcat.cli import arguments
 from bearcat.cli.arguments import Commands
 from bearcat.cli.presolve import await_behind, presolve
 from bearcat.cli.writing import make_directory, writing
+from bearcat.runtime.peer_spec import ROLES
 from bearcat.runtime.peers import NETWORKS
 from bearcat.runtime.run_directory import fresh
 from bearcat.runtime.solve_ahead import SolveBehind, compile_queries_behind
@@ -92,7 +93,7 @@ def register(commands: Commands) -> None:
     )
     run.add_argument(
         "--page",
-        type=_address,
+        type=_host_and_port,
         default=("0.0.0.0", 8443),
         metavar="HOST:PORT",
         help="where the phones' pages are served (default 0.0.0.0:8443; the next phone on the next port)",
@@ -134,10 +135,16 @@ def register(commands: Commands) -> None:
         description="Start one peer of a scenario: the ground station (referee, guidance and UAV tasking), one "
         "walker, or one UAV flying a MAVLink vehicle (the emulator of bearcat vehicle, PX4 SITL or a real PX4).",
     )
-    peer.add_argument("role", choices=("ground-station", "walker", "phone", "uav"))
+    peer.add_argument("role", nargs="?", choices=ROLES)
+    peer.add_argument(
+        "--spec",
+        type=Path,
+        metavar="FILE",
+        help="every setting from this file (RUN/peers/NAME.spec.json, as bearcat run writes it) instead of "
+        "ROLE and the options below",
+    )
     peer.add_argument(
         "--scenario",
-        required=True,
         metavar="SCENARIO",
         help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station",
     )
@@ -356,66 +363,63 @@ def _open_viewer(rrd: Path, *extra: str) -> int:
     return subprocess.call([viewer, str(rrd), "--bind", LOOPBACK, *extra])
 
 
-def run_peer(args) -> int:
+def run_peer(args, page=None) -> int:
+    from bearcat.runtime.peer_spec import read_spec, spec_of
+
+    if args.spec is not None:
+        if args.role is not None:
+            raise arguments.UsageError("--spec FILE holds the peer's role and every setting: give no ROLE with it")
+        spec = read_spec(args.spec)
+    elif args.role is None or args.scenario is None:
+        raise arguments.UsageError("bearcat peer needs a ROLE and --scenario SCENARIO, or --spec FILE")
+    else:
+        spec = spec_of(vars(args))
+    return _run_spec(spec, page)
+
+
+def _run_spec(spec, page=None) -> int:
     from bearcat.runtime.live import fetch_scenario, start_peer
 
-    name = args.id if args.role != "ground-station" else GROUND
-    if args.scenario.startswith("zenoh:"):
-        scenario = fetch_scenario(
-            args.scenario[len("zenoh:") :], args.connect, certs=args.certs, name=name, secure=args.secure
-        )
+    certs = None if spec.certs is None else Path(spec.certs)
+    if spec.scenario.startswith("zenoh:"):
+        game = spec.scenario[len("zenoh:") :]
+        scenario = fetch_scenario(game, list(spec.connect), certs=certs, name=spec.name, secure=spec.secure)
     else:
-        scenario = load_scenario(args.scenario)
-    if args.role == "ground-station":
-        presolve(scenario, args.netem or scenario.netem, provisional=args.provisional)
-    plan = scenario.faults if args.faults is None else load_faults(args.faults, scenario)
-    with nullcontext() if args.out is None else writing(args.out, "run directory"):
-        reason = start_peer(
-            args.role,
-            scenario,
-            args.id,
-            connect=args.connect,
-            listen=args.listen,
-            mode=args.mode,
-            transport=args.transport or scenario.transport,
-            network=args.network,
-            judge=args.judge,
-            seed=scenario.seed if args.seed is None else args.seed,
-            netem=args.netem or scenario.netem,
-            out=args.out,
-            vehicle=args.vehicle,
-            sysid=args.sysid,
-            emulated=args.emulated,
-            faults=plan,
-            resume=args.resume,
-            certs=args.certs,
-            secure=args.secure,
-            page=_page_server(args) if args.role == "phone" else None,
-            say=lambda text: print(text, flush=True),
-            provisional=args.provisional,
-        )
-    print(f"peer {name}: {reason}", flush=True)
+        scenario = load_scenario(spec.scenario)
+    if spec.role == "ground-station":
+        presolve(scenario, spec.netem or scenario.netem, provisional=spec.provisional)
+    with nullcontext() if spec.out is None else writing(Path(spec.out), "run directory"):
+        reason = start_peer(spec, scenario, say=lambda text: print(text, flush=True), page=page)
+    print(f"peer {spec.name}: {reason}", flush=True)
     return 0
 
 
 def run_phone(args) -> int:
     """``bearcat phone``: ``bearcat peer phone`` with the scenario fetched from the game's ground station."""
-    args.role, args.scenario, args.mode, args.listen = "phone", f"zenoh:{args.game}", "client", None
-    args.faults = args.resume = args.vehicle = args.sysid = None
-    args.seed = args.netem = args.transport = None
-    args.network, args.judge, args.emulated, args.provisional = "shim", "fixes", False, False
-    server = _page_server(args)
+    from bearcat.agents.human.browser_bridge import page_server
+    from bearcat.runtime.peer_spec import PeerSpec
+
+    spec = PeerSpec(
+        role="phone",
+        scenario=f"zenoh:{args.game}",
+        id=args.id,
+        connect=tuple(args.connect),
+        mode="client",
+        out=None if args.out is None else str(args.out),
+        certs=None if args.certs is None else str(args.certs),
+        secure=args.secure,
+    )
+    server = page_server(args.page, args.cert, args.key, args.token_file)  # one token, the link's and the page's
     print(f"open {server.url()} on the phone of {args.id}\n{server.qr()}", flush=True)
-    return run_peer(args)
+    return _run_spec(spec, server)
 
 
 def _page_arguments(parser, *, listen: str) -> None:
     """The options of a real phone's page: where it is served, its certificate, its token."""
     parser.add_argument(
         listen,
-        dest="listen_page",
+        dest="page",
         type=_address,
-        default=("0.0.0.0", 8443),
         metavar="HOST:PORT",
         help="phone: where its page is served over HTTPS (default 0.0.0.0:8443)",
     )
@@ -431,21 +435,20 @@ def _page_arguments(parser, *, listen: str) -> None:
     )
 
 
-def _page_server(args):
-    from bearcat.agents.human.browser_bridge import PageServer, new_token
+def _host_and_port(text: str) -> tuple[str, int]:
+    from bearcat.agents.human.browser_bridge import page_address
+    from bearcat.bus.errors import BusError
 
-    if (args.cert is None) != (args.key is None):
-        raise arguments.UsageError("--cert and --key go together: the page's certificate and its key")
-    token = args.token_file.read_text().strip() if args.token_file else new_token()
-    host, port = args.listen_page
-    return PageServer(host=host, port=port, token=token, cert=args.cert, key=args.key)
+    try:
+        return page_address(text)
+    except BusError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
 
 
-def _address(text: str) -> tuple[str, int]:
-    host, _, port = text.rpartition(":")
-    if not host or not port.isdigit() or not 0 < int(port) < 65536:
-        raise argparse.ArgumentTypeError(f"{text!r} is not HOST:PORT, e.g. 0.0.0.0:8443")
-    return host, int(port)
+def _address(text: str) -> str:
+    """``HOST:PORT``, checked, as the peer's spec keeps it."""
+    _host_and_port(text)
+    return text
 
 
 def _reference(text: str) -> str:

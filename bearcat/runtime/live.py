@@ -31,20 +31,26 @@ import logging
 import signal
 import threading
 import time
+from collections.abc import Callable
 from contextlib import closing
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from bearcat.agents.ground_station.ctf_cache import cached
 from bearcat.agents.ground_station.event_log import EventLog
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
 from bearcat.bus.codec import Inbox
+from bearcat.bus.errors import BusError
 from bearcat.bus.handoff import Handoff
 from bearcat.bus.messages import Control, FaultNotice, GameState
 from bearcat.netem.shim import Shim
 from bearcat.runtime.dispatch import Dispatcher
+from bearcat.runtime.peer_spec import PeerSpec
 from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, skewed
 from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
+from bearcat.scenarios.schema import ScenarioError
 from bearcat.solvers.ctf_queries import CtfQueries
 
 log = logging.getLogger(__name__)
@@ -260,107 +266,45 @@ def _run_wide(out) -> Path | None:
     return path if path is not None and path.exists() else None
 
 
-def start_peer(
-    role: str,
-    scenario,
-    agent: str,
-    *,
-    connect,
-    listen,
-    seed: int,
-    netem: str,
-    out=None,
-    mode="peer",
-    transport: str = "tcp",
-    network: str = "shim",
-    judge="truth",
-    vehicle: str | None = None,
-    sysid: int | None = None,
-    emulated: bool = False,
-    faults: tuple = (),
-    resume: bool = False,
-    certs=None,
-    secure: bool = False,
-    page=None,
-    say=None,
-    provisional: bool = False,
-) -> str:
-    """Build this peer's agents and run them until the game ends (``bearcat peer``).
-    With ``certs``, a directory holding this peer's certificate and key, it
-    seals what it sends and takes only what the access policy lets each
-    provable sender publish; without, it believes every name (a private host).
-    A ``secure`` peer is a client of a router over ``tls/`` alone, presenting
-    that certificate. A "phone" peer is a person's real phone: it serves the
-    page of ``page`` (a ``PageServer``), tells ``say`` where, and joins the
-    game once the page has sent its first fix.
-    ``faults`` is the run's fault plan; a peer restarted mid-game ``resume``s
-    from its own log in ``out``.
+def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
+    """Build the agents of peer ``spec`` in ``scenario`` and run them until
+    the game ends (``bearcat peer``). With ``spec.certs``, a directory
+    holding this peer's certificate and key, it seals what it sends and
+    takes only what the access policy lets each provable sender publish;
+    without, it believes every name (a private host). A ``secure`` peer is a
+    client of a router over ``tls/`` alone, presenting that certificate. A
+    "phone" peer is a person's real phone: it serves the page (``page``, a
+    ``PageServer``; default: the spec's), tells ``say`` where, and joins the
+    game once the page has sent its first fix. A peer
+    restarted mid-game ``resume``s from its own log in ``out``.
     With ``transport`` "udp" its best-effort messages go to the same
     endpoints over ``udp/`` (see ``bus.zenoh_session``). On a ``network``
     "kernel" the links are impaired below it, so its shim keeps only the
     dead zones; GPS and compass error stay in the phone either way.
-    A UAV peer flies the vehicle at MAVLink URL ``vehicle`` (system ``sysid``);
-    an ``emulated`` vehicle's telemetry is the truth. A ``provisional``
-    ground station whose sets are not cached answers from coarser ones and
-    takes its own up once they are (``bearcat run`` solves them meanwhile)."""
+    A UAV peer flies the vehicle at MAVLink URL ``vehicle``; an ``emulated``
+    vehicle's telemetry is the truth. A ``provisional`` ground station whose
+    sets are not cached answers from coarser ones and takes its own up once
+    they are (``bearcat run`` solves them meanwhile)."""
     import shapely
 
-    from bearcat.bus.errors import BusError
     from bearcat.bus.identity import Credentials
     from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
     from bearcat.netem.models import LinkModel
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import build_cast
-    from bearcat.scenarios.schema import ScenarioError
+    from bearcat.scenarios.faults import load_faults
 
-    profile = load_profile(netem)
+    profile = load_profile(spec.netem or scenario.netem)
+    seed = scenario.seed if spec.seed is None else spec.seed
+    transport = spec.transport or scenario.transport
+    plan = scenario.faults if spec.faults is None else load_faults(Path(spec.faults), scenario)
+    out = spec.out
     lease_ms = round(1000 * scenario.lease)
-    autopilot = None
-    players = None
-    if role == "ground-station":
-        players = build_cast(scenario, profile, seed, people=[], ground=True, judge=judge, provisional=provisional)
-        assert players.guidance is not None  # a cast with its ground station
-        agents, name = players.ground, players.guidance.name
-    elif role == "uav":
-        from bearcat.agents.uav.autopilot import MavsdkAutopilot
-
-        if agent not in [u.id for u in scenario.uavs]:
-            raise ScenarioError(
-                f"{scenario.source}: there is no UAV {agent!r}; the UAVs are "
-                f"{', '.join(u.id for u in scenario.uavs) or 'none'}"
-            )
-        if not vehicle:
-            raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
-        autopilot = MavsdkAutopilot(vehicle, sysid=sysid)
-        players = build_cast(
-            scenario,
-            profile,
-            seed,
-            people=[],
-            uavs=[agent],
-            ground=False,
-            autopilots={agent: autopilot},
-            uav_truth=emulated,
-        )
-        agents, name = [players.uavs[agent]], agent
-    elif role == "phone":
-        from bearcat.agents.human.page_phone import PagePhone
-
-        if agent not in scenario.ids:
-            raise ScenarioError(
-                f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
-            )
-        agents, name = [PagePhone(scenario.name, agent, scenario.map)], agent
-    elif role == "walker":
-        if agent not in scenario.ids:
-            raise ScenarioError(
-                f"{scenario.source}: there is no agent {agent!r}; the agents are {', '.join(scenario.ids)}"
-            )
-        players = build_cast(scenario, profile, seed, people=[agent], ground=False)
-        agents, name = [players.people[agent]], agent
-    else:
-        raise BusError(f"role {role!r} cannot be started as a peer; start ground-station, walker, phone or uav")
-    if resume and out is not None:
+    builder = _BUILDERS.get(spec.role)
+    if builder is None:
+        raise BusError(f"role {spec.role!r} cannot be started as a peer; start ground-station, walker, phone or uav")
+    cast = builder(spec, scenario, profile, seed)
+    agents, name, players = cast.agents, spec.name, cast.players
+    if spec.resume and out is not None:
         from bearcat.runtime.recovery import last_sent
         from bearcat.runtime.recovery import resume as take_up
 
@@ -372,8 +316,9 @@ def start_peer(
             take_up(agent, last, scenario.name)
     zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
-    credentials = None if certs is None else Credentials(certs, name)
-    if secure:
+    credentials = None if spec.certs is None else Credentials(Path(spec.certs), name)
+    connect, listen, mode = list(spec.connect), None if spec.listen is None else list(spec.listen), spec.mode
+    if spec.secure:
         _check_secure(credentials, connect)
         mode, listen = "client", []  # a peer that listens could be reached around the router's access control
     if mode == "client" and listen is None:
@@ -388,7 +333,9 @@ def start_peer(
         ) as record,
         ZenohSession(
             name,
-            config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=credentials if secure else None),
+            config(
+                listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=credentials if spec.secure else None
+            ),
             best_effort=None
             if transport == "tcp"
             else config(
@@ -397,7 +344,7 @@ def start_peer(
             credentials=credentials,
         ) as session,
     ):
-        if role == "ground-station":
+        if spec.role == "ground-station":
             # A peer started elsewhere (a phone's bridge, a drone's companion) fetches these.
             from bearcat.maps.geojson import dumps
 
@@ -413,12 +360,12 @@ def start_peer(
                 if message is not None:
                     positions[message.agent] = scenario.map.to_local(message.lat, message.lon)
 
-            every = role == "ground-station"
+            every = spec.role == "ground-station"
             session.subscribe(
                 keys.every(scenario.name, "truth") if every else keys.truth(scenario.name, name), on_truth
             )
         shim = Shim(
-            profile.link if network == "shim" else LinkModel(),
+            profile.link if spec.network == "shim" else LinkModel(),
             seed,
             dead_zones=zones,
             where=positions.get if zones is not None else None,
@@ -437,16 +384,21 @@ def start_peer(
             scenario.name,
             shim=shim,
             record=record,
-            faults=faults,
-            network=network,
+            faults=plan,
+            network=spec.network,
             lease=scenario.lease,
             awaited=None if players is None else players.awaited,
             adopt=None if players is None else players.adopt,
             say=say,
             warm_up=None if players is None else players.warm_up,
         )
-        if role == "phone":
+        if spec.role == "phone":
+            if page is None:
+                from bearcat.agents.human.browser_bridge import page_server
+
+                page = page_server(spec.page, spec.cert, spec.key, spec.token_file)
             return asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))
+        autopilot = cast.autopilot
         if autopilot is None:
             return asyncio.run(peer)
         with asyncio.Runner() as runner:
@@ -454,6 +406,77 @@ def start_peer(
             # that never will (its vehicle died) must not keep the peer alive.
             runner.get_loop().set_default_executor(DaemonExecutor())
             return runner.run(_fly(autopilot, peer))
+
+
+@dataclass(frozen=True)
+class _Cast:
+    """What a role's builder gives its peer: the agents it runs, the cast
+    they came from (None for a phone) and the UAV's autopilot, if any."""
+
+    agents: list
+    players: Any = None
+    autopilot: Any = None
+
+
+def _known(scenario, agent: str, ids, what: str) -> None:
+    if agent not in ids:
+        raise ScenarioError(
+            f"{scenario.source}: there is no {what} {agent!r}; the {what}s are {', '.join(ids) or 'none'}"
+        )
+
+
+def _ground_station(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
+    from bearcat.scenarios.cast import build_cast
+
+    players = build_cast(
+        scenario, profile, seed, people=[], ground=True, judge=spec.judge, provisional=spec.provisional
+    )
+    assert players.guidance is not None  # a cast with its ground station
+    return _Cast(players.ground, players)
+
+
+def _uav(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
+    from bearcat.agents.uav.autopilot import MavsdkAutopilot
+    from bearcat.scenarios.cast import build_cast
+
+    _known(scenario, spec.id, [u.id for u in scenario.uavs], "UAV")
+    if not spec.vehicle:
+        raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
+    autopilot = MavsdkAutopilot(spec.vehicle, sysid=spec.sysid)
+    players = build_cast(
+        scenario,
+        profile,
+        seed,
+        people=[],
+        uavs=[spec.id],
+        ground=False,
+        autopilots={spec.id: autopilot},
+        uav_truth=spec.emulated,
+    )
+    return _Cast([players.uavs[spec.id]], players, autopilot)
+
+
+def _phone(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
+    from bearcat.agents.human.page_phone import PagePhone
+
+    _known(scenario, spec.id, scenario.ids, "agent")
+    return _Cast([PagePhone(scenario.name, spec.id, scenario.map)])
+
+
+def _walker(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
+    from bearcat.scenarios.cast import build_cast
+
+    _known(scenario, spec.id, scenario.ids, "agent")
+    players = build_cast(scenario, profile, seed, people=[spec.id], ground=False)
+    return _Cast([players.people[spec.id]], players)
+
+
+_BUILDERS: dict[str, Callable[..., _Cast]] = {
+    "ground-station": _ground_station,
+    "uav": _uav,
+    "phone": _phone,
+    "walker": _walker,
+}
 
 
 async def _bridged(phone, page, peer, record, say) -> str:
@@ -584,8 +607,6 @@ def _read_keys(behaviour) -> None:
     import termios
     import threading
     import tty
-
-    from bearcat.scenarios.schema import ScenarioError
 
     if not sys.stdin.isatty():
         raise ScenarioError("the keyboard behaviour needs a terminal: start this peer from one")

@@ -33,6 +33,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+import msgspec
+
 from bearcat.agents.ground_station.event_log import EventLog, read_events
 from bearcat.bus import keys
 from bearcat.bus.addresses import reachable
@@ -44,7 +46,8 @@ from bearcat.bus.zenoh_session import ZenohSession
 from bearcat.runtime import processes, remote
 from bearcat.runtime.dispatch import FAILED
 from bearcat.runtime.live_faults import LiveFaults
-from bearcat.runtime.peer_commands import BEARCAT, VEHICLE, free_port, peer_command, started_by_hand, vehicle_command
+from bearcat.runtime.peer_commands import BEARCAT, VEHICLE, free_port, started_by_hand, vehicle_command
+from bearcat.runtime.peer_spec import PeerSpec, flags, write_spec
 from bearcat.runtime.peers import LocalPeers
 from bearcat.scenarios.faults import GROUND, LAUNCHER
 from bearcat.scenarios.schema import Scenario
@@ -201,9 +204,9 @@ class LiveRun:
         phones = s.phones
         self.how[GROUND] = (
             "ground-station",
-            (*(("--judge", "fixes") if phones else ()), *(("--provisional",) if s.provisional else ())),
+            {"judge": "fixes" if phones else "truth", "provisional": s.provisional},
         )
-        self.how |= {a.id: ("walker", ()) for a in s.scenario.agents if a.id not in self.by_hand and a.id not in phones}
+        self.how |= {a.id: ("walker", {}) for a in s.scenario.agents if a.id not in self.by_hand and a.id not in phones}
         pages = _pages(tuple(p for p in phones if p not in self.by_hand), s.page, s.out)
         self.how |= {name: server_how for name, (_, server_how) in pages.items()}
         for name in list(self.how):
@@ -216,16 +219,37 @@ class LiveRun:
                 self._start_uav(k, uav.id)
         self._say_who_joins_by_hand()
 
-    def start_peer(self, name: str, *, again: bool = False) -> subprocess.Popen:
-        """Start peer ``name`` as ``how`` says; ``again`` resumes one a fault stopped."""
+    def spec(self, role: str, name: str, at: str, **own) -> PeerSpec:
+        """Peer ``name``'s spec in ``role``, joining the router at ``at``, with the settings of its role ``own``."""
         s = self.settings
-        role, extra = self.how[name]
-        if again:
-            extra = (*extra, "--resume")
+        faults = str((s.out / "faults.toml").resolve()) if s.plan else None
+        return PeerSpec(
+            role=role,  # type: ignore[arg-type]
+            scenario=s.scenario_ref,
+            id=name,
+            connect=(at,),
+            mode="client",
+            seed=s.seed,
+            netem=s.netem,
+            network=self.places.impairs,  # type: ignore[arg-type]
+            transport=s.transport,  # type: ignore[arg-type]
+            out=str(s.out),
+            certs=str(self.certs),
+            secure=s.secure,
+            faults=faults,
+            **own,
+        )
+
+    def start_peer(self, name: str, *, again: bool = False) -> subprocess.Popen:
+        """Start peer ``name`` as ``how`` says, from the spec it is handed in
+        ``RUN/peers``; ``again`` resumes one a fault stopped."""
+        s = self.settings
+        role, own = self.how[name]
+        path = s.out / "peers" / f"{name}{'.resumed' if again else ''}.spec.json"
 
         def command(at: str) -> list[str]:
-            flags = peer_command(role, s.scenario_ref, name, at, s.seed, s.netem, s.out, self.certs, s.transport)
-            return [*flags, *self.places.peer_flags, *self._run_flags(), *extra]
+            write_spec(path, self.spec(role, name, at, resume=again, **own))
+            return [*BEARCAT, "peer", "--spec", str(path)]
 
         # The ground station and the phones' bridges stay on the laptop: a real phone's network is real.
         colocated = role in ("ground-station", "phone")
@@ -234,18 +258,11 @@ class LiveRun:
         processes.record(s.out, name, peer.pid)
         return peer
 
-    def _run_flags(self) -> tuple[str, ...]:
-        """What every peer the launcher starts is told of the run: secured, and its fault plan."""
-        flags: tuple[str, ...] = ("--secure",) if self.settings.secure else ()
-        if self.settings.plan:
-            flags += ("--faults", str((self.settings.out / "faults.toml").resolve()))
-        return flags
-
     def _start_uav(self, k: int, name: str) -> None:
         """UAV ``k``'s peer, and the vehicle emulator it flies over MAVLink on a free UDP port."""
         s = self.settings
         port = free_port(socket.SOCK_DGRAM)
-        self.how[name] = ("uav", ("--vehicle", f"udpin://0.0.0.0:{port}", "--sysid", str(k + 1), "--emulated"))
+        self.how[name] = ("uav", {"vehicle": f"udpin://0.0.0.0:{port}", "sysid": k + 1, "emulated": True})
         flyer = self.children[name] = self.start_peer(name)
         vehicle = f"vehicle-{name}"
         self.children[vehicle] = self.places.start_vehicle(
@@ -258,30 +275,31 @@ class LiveRun:
         fetches the scenario from the ground station, keeps its logs on its
         own machine and runs that machine's own installation."""
         s = self.settings
-        logs: Path | None
         program: tuple[str, ...]
         if self.elsewhere:
-            at, ref, logs, program = self.elsewhere[0], f"zenoh:{self.game}", None, ("bearcat",)
+            at, program = self.elsewhere[0], ("bearcat",)
             if not self.by_hand:
                 s.say("router: no agent or UAV is left for another machine to start; --joins AGENT leaves one")
         else:
-            at, ref, logs, program = self.places.loopback, s.scenario_ref, s.out, BEARCAT
-        guarded = ["--secure"] if s.secure else []
+            at, program = self.places.loopback, BEARCAT
         uavs = [u.id for u in s.scenario.uavs]
         for name in (p for p in (*s.scenario.ids, *uavs) if p in self.by_hand):
             role = "uav" if name in uavs else "walker"
-            peer = peer_command(role, ref, name, at, s.seed, s.netem, logs, self.certs, s.transport, program=program)
-            if role == "uav":
-                peer += ["--vehicle", VEHICLE]
+            spec = self.spec(role, name, at, **({"vehicle": VEHICLE} if role == "uav" else {}))
+            # Started by hand on the host's own network, with no process of the launcher's for a fault to act on.
+            spec = msgspec.structs.replace(spec, faults=None, network="shim")
+            if self.elsewhere:
+                spec = msgspec.structs.replace(spec, scenario=f"zenoh:{self.game}", out=None)
             bridge = [*program, "phone", "--connect", at, "--game", self.game, "--id", name, "--certs", str(self.certs)]
-            bridge += [] if logs is None else ["--out", str(logs)]
-            chosen = bridge if name in s.phones else peer
+            bridge += [] if spec.out is None else ["--out", spec.out]
+            bridge += ["--secure"] if s.secure else []
+            chosen = bridge if name in s.phones else [*program, "peer", *flags(spec)]
             s.say(
                 _joining(
                     s.scenario,
                     name,
                     name in s.phones,
-                    chosen + guarded,
+                    chosen,
                     certs=self.certs,
                     elsewhere=bool(self.elsewhere),
                 )
@@ -452,7 +470,7 @@ def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[st
         token_file = out / "phones" / f"{name}.token"
         token_file.touch(mode=0o600)
         token_file.write_text(server.token + "\n")
-        pages[name] = (server, ("phone", ("--page", f"{server.host}:{server.port}", "--token-file", str(token_file))))
+        pages[name] = (server, ("phone", {"page": f"{server.host}:{server.port}", "token_file": str(token_file)}))
     return pages
 
 

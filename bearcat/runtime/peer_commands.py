@@ -1,15 +1,15 @@
-"""The command lines that start a live run's processes: a peer in its role,
-a UAV's vehicle emulator, and which peers a person starts instead.
+"""What a live run's processes are started with besides a peer's spec
+(``peer_spec``): the installation that runs them, a UAV's vehicle emulator,
+free ports, and which peers a person starts instead.
 
 Kept apart from the run itself so that the launcher's checks before a run,
-the run, and the tests that start one peer by hand build the same commands.
+the run, and the tests that start a peer by hand share them.
 """
 
 from __future__ import annotations
 
 import socket
 import sys
-from pathlib import Path
 
 from bearcat.scenarios.schema import Scenario
 
@@ -37,44 +37,6 @@ def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
         f"{lat:.8f},{lon:.8f},0",
         "--max-speed",
         str(scenario.uavs[k].speed),
-    ]
-
-
-def peer_command(
-    role: str,
-    scenario_ref: str,
-    agent: str,
-    endpoint: str,
-    seed: int,
-    netem: str,
-    out: Path | None,
-    certs: Path,
-    transport: str = "tcp",
-    *,
-    program: tuple[str, ...] = BEARCAT,
-) -> list[str]:
-    """The command that starts peer ``agent`` in ``role``, writing its logs into run directory ``out`` if given."""
-    return [
-        *program,
-        "peer",
-        role,
-        "--scenario",
-        scenario_ref,
-        "--id",
-        agent,
-        "--connect",
-        endpoint,
-        "--mode",
-        "client",
-        "--seed",
-        str(seed),
-        "--netem",
-        netem,
-        "--transport",
-        transport,
-        *(() if out is None else ("--out", str(out))),
-        "--certs",
-        str(certs),
     ]
 
 

@@ -27,7 +27,7 @@ class LocalPeers:
     """Peers on this host's network; the router listens on the loopback at
     ``port``, over ``tls/`` alone when ``secure``."""
 
-    peer_flags: tuple[str, ...] = ()  # what a peer is told of the network it runs on
+    impairs = "shim"  # what impairs a peer's messages, as its spec says it (``PeerSpec.network``)
 
     def __init__(self, port: int, *, secure: bool = False) -> None:
         self.secure = secure
@@ -81,7 +81,7 @@ class LocalPeers:
 class KernelPeers(LocalPeers):
     """Peers in namespaces behind a kernel network impairing packets with profile ``netem``."""
 
-    peer_flags = ("--network", "kernel")
+    impairs = "kernel"
 
     def __init__(self, port: int, netem: str, seed: int, report: Path, *, secure: bool = False) -> None:
         from bearcat.netem.kernel.network import KernelNetwork

@@ -31,6 +31,7 @@ from aiohttp import WSMsgType, web
 from bearcat.agents.human.page_phone import PagePhone
 from bearcat.bus.addresses import local_addresses, reachable
 from bearcat.bus.endpoints import WILDCARDS
+from bearcat.bus.errors import BusError
 from bearcat.bus.identity import self_signed
 
 log = logging.getLogger(__name__)
@@ -69,6 +70,35 @@ class PageServer:
 
 def new_token() -> str:
     return secrets.token_urlsafe(16)
+
+
+PAGE = "0.0.0.0:8443"
+"""Where a phone's page is served unless told otherwise: every interface, HTTPS's alternative port."""
+
+
+def page_address(text: str) -> tuple[str, int]:
+    """``HOST:PORT`` as a host and a port; one sentence for anything else."""
+    host, _, port = text.rpartition(":")
+    if not host or not port.isdigit() or not 0 < int(port) < 65536:
+        raise BusError(f"{text!r} is not HOST:PORT, e.g. {PAGE}")
+    return host, int(port)
+
+
+def page_server(page: str | None, cert: str | Path | None, key: str | Path | None, token_file: str | Path | None):
+    """The server of a phone's page at ``page`` (HOST:PORT, None: ``PAGE``)
+    with ``cert`` and ``key`` (both or neither: neither makes one for the
+    session) and the token kept in ``token_file`` (None: a new one)."""
+    if (cert is None) != (key is None):
+        raise BusError("--cert and --key go together: the page's certificate and its key")
+    token = Path(token_file).read_text().strip() if token_file else new_token()
+    host, port = page_address(page or PAGE)
+    return PageServer(
+        host=host,
+        port=port,
+        token=token,
+        cert=None if cert is None else Path(cert),
+        key=None if key is None else Path(key),
+    )
 
 
 class Bridge:
