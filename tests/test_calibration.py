@@ -96,9 +96,9 @@ def test_a_calibration_reads_back_as_written_and_bins_every_age():
 
 @pytest.fixture(scope="module")
 def field_game():
-    from bearcat.agents.ground_station.ctf_cache import default_rules
     from bearcat.maps import load_map
     from bearcat.maps.ctf import ctf_geometry
+    from bearcat.maps.ctf_rules import default_rules
     from bearcat.solvers.ctf import solve_ctf
     from bearcat.solvers.ctf_queries import CtfQueries
 

@@ -8,8 +8,9 @@ behind the game stores them and, stopped, leaves no process running."""
 
 import pytest
 
-from bearcat.agents.ground_station.ctf_cache import cached, load_or_solve, provisional_grid
+from bearcat.agents.ground_station.ctf_cache import cached, load_or_solve
 from bearcat.maps import load_map
+from bearcat.maps.ctf_rules import provisional_grid
 from bearcat.netem.profiles import load_profile
 from bearcat.runtime.solve_ahead import SolveBehind
 from bearcat.scenarios.cast import build_cast

@@ -12,19 +12,14 @@ import time
 from dataclasses import asdict
 from pathlib import Path
 
-from bearcat.agents.ground_station.ctf_cache import (
-    CtfGame,
-    Solved,
-    cache_root,
-    default_rules,
-    load_or_solve,
-    unresolved_capture,
-)
+from bearcat.agents.cache import cache_root
+from bearcat.agents.ground_station.ctf_cache import CtfGame, Solved, load_or_solve
 from bearcat.cli import arguments
 from bearcat.cli.output import Output, add_json_option
 from bearcat.cli.progress import solve_bars
 from bearcat.cli.writing import writing
 from bearcat.maps import load_map
+from bearcat.maps.ctf_rules import default_rules, unresolved_capture
 from bearcat.maps.geodesy import bearing
 from bearcat.scenarios.schema import UNCERTAINTIES
 from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES

@@ -15,7 +15,7 @@ import argparse
 import time
 from pathlib import Path
 
-from bearcat.agents.ground_station.ctf_cache import cache_root
+from bearcat.agents.cache import cache_root
 from bearcat.cli import arguments
 from bearcat.cli.output import Output, add_json_option
 from bearcat.cli.progress import counting, solve_bars

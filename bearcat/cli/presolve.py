@@ -12,7 +12,7 @@ from bearcat.cli.writing import writing
 
 def presolve(scenario, netem: str, *, provisional: bool = False) -> None:
     """``solve_ahead`` with a bar per set solved."""
-    from bearcat.agents.ground_station.ctf_cache import cache_root
+    from bearcat.agents.cache import cache_root
     from bearcat.runtime.solve_ahead import solve_ahead
 
     bars = solve_bars()

@@ -20,14 +20,7 @@ import shapely
 
 from bearcat.agents.ground_station.calibration import Calibration
 from bearcat.agents.ground_station.calibration_store import calibrate_command, load_calibration
-from bearcat.agents.ground_station.ctf_cache import (
-    CtfGame,
-    default_rules,
-    load_or_solve,
-    provisional_grid,
-    stored,
-    unresolved_capture,
-)
+from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve, stored
 from bearcat.agents.ground_station.guidance import (
     CtfAdvisor,
     GuidanceService,
@@ -48,6 +41,7 @@ from bearcat.agents.navigation import Navigator, navigator
 from bearcat.agents.uav.agent import UavAgent
 from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.autopilot import SimulatedAutopilot
+from bearcat.maps.ctf_rules import default_rules, provisional_grid, unresolved_capture
 from bearcat.netem.profiles import Profile
 from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
 from bearcat.solvers.ctf_queries import CtfQueries

@@ -25,7 +25,8 @@ import msgspec
 import numpy as np
 from msgspec import Meta
 
-from bearcat.agents.ground_station.ctf_cache import cache_root, solver_fingerprint, write_atomically
+from bearcat.agents.cache import cache_root, write_atomically
+from bearcat.agents.ground_station.ctf_cache import solver_fingerprint
 from bearcat.bus.validation import Invalid, convert
 from bearcat.solvers.backflip import Backflip, BackflipSets, SetProgress, TargetBox, design
 from bearcat.solvers.errors import InputError

@@ -267,14 +267,14 @@ Spacing = Annotated[float, Meta(gt=0.0, le=100.0, extra={"unit": "m"})]
 
 
 class CtfRules(_Table, frozen=True):
-    """Unset radius and times are derived from the map and the speeds (``ctf_cache.default_rules``)."""
+    """Unset radius and times are derived from the map and the speeds (``maps.ctf_rules.default_rules``)."""
 
     capture_radius: Radius | None = None
     stages: Literal["return", "both"] = "return"
     grid: Annotated[int, Meta(ge=9, le=201)] = 45
     # The grid of the sets a live run starts on while the ``grid`` sets are
     # not yet solved; unset: derived from the capture radius
-    # (``ctf_cache.provisional_grid``), 0: wait for the ``grid`` sets.
+    # (``maps.ctf_rules.provisional_grid``), 0: wait for the ``grid`` sets.
     provisional_grid: Annotated[int, Meta(ge=0, le=201)] | None = None
     capture_time: Horizon | None = None
     return_time: Horizon | None = None

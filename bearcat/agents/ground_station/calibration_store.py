@@ -18,8 +18,9 @@ import json
 import logging
 from pathlib import Path
 
+from bearcat.agents.cache import cache_root, write_atomically
 from bearcat.agents.ground_station.calibration import Calibration
-from bearcat.agents.ground_station.ctf_cache import CtfGame, cache_root, write_atomically
+from bearcat.agents.ground_station.ctf_cache import CtfGame
 from bearcat.agents.ground_station.tracker import TRACKER_ABLATIONS
 from bearcat.netem.profiles import Profile
 
