@@ -6,9 +6,11 @@
 #      msgspec);
 #   2. the tests that hold the CUDA sets to the CPU's (tests/test_hji_cuda.py), on the GPU: no simulator;
 #   3. benchmarks/hji.py --device cuda: ours against hj_reachability on the same GPU, the two-stage game at 45^4,
-#      65^4 and 101^4, the kernels' compile, and the targets.
+#      65^4 and 101^4, the kernels' compile, and the targets;
+#   4. benchmarks/hji.py --threads: the CPU backend at 1, 2, 4, 8 and 16 threads on the machine's cores.
 #
-#   benchmarks/device_checks.sh [all|tests|bench|quick]     (default all; quick: the tests, then bench --quick)
+#   benchmarks/device_checks.sh [all|tests|bench|threads|quick]
+#                                         (default all; quick: the tests, then bench --quick and threads --quick)
 #
 # Logs go to $OUT (the folder a lent machine sends back) or /tmp/bearcat-device-checks. The step that fails stops
 # the script with its exit code. The wheels, fetched on a machine that reaches an index (Python 3.12, x86-64), into
@@ -77,4 +79,11 @@ if [ "$what" = all ] || [ "$what" = bench ]; then
 elif [ "$what" = quick ]; then
     echo "== benchmarks/hji.py --device cuda --quick"
     timeout 300 "$python" benchmarks/hji.py --device cuda --quick 2>&1 | tee "$out/benchmark.txt"
+fi
+if [ "$what" = all ] || [ "$what" = threads ]; then
+    echo "== benchmarks/hji.py --threads"
+    timeout 240 "$python" benchmarks/hji.py --threads 2>&1 | tee "$out/threads.txt"
+elif [ "$what" = quick ]; then
+    echo "== benchmarks/hji.py --threads --quick"
+    timeout 120 "$python" benchmarks/hji.py --threads --quick 2>&1 | tee "$out/threads.txt"
 fi

@@ -7,6 +7,8 @@ problem, scheme, grid, CFL number, boundary rule and horizon.
     python benchmarks/hji.py --game     # only the two-stage game at 45^4 and 65^4
     python benchmarks/hji.py --device cuda   # on a CUDA GPU: ours against hj_reachability on the same GPU,
                                              # the two-stage game at 45^4, 65^4 and 101^4, the kernels' compile
+    python benchmarks/hji.py --threads  # ours at 1, 2, 4, 8 and 16 threads (as many as the machine has cores),
+                                        # beside the memory bandwidth those threads reach
 
 Each of our solves runs twice, on the full grid and by the local band
 (``solve_reach_avoid(local=True)``), with the node updates of each (node
@@ -35,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
 import resource
 import subprocess
@@ -244,6 +247,9 @@ def child(args) -> None:
     if args.solver == "compile":
         print(json.dumps(run_compile()))
         return
+    if args.solver == "bandwidth":
+        print(json.dumps({"gb_s": triad_gb_s()}))
+        return
     if args.solver == "ours":
         out = run_ours(args.n, args.scheme, args.horizon, args.tol, args.local, args.device)
     else:
@@ -318,7 +324,12 @@ def main() -> None:
         default="cpu",
         help="cpu (default): ours on every core against hj_reachability on the CPU; cuda: both on this machine's GPU",
     )
-    parser.add_argument("--child", choices=("ours", "hj", "game", "compile"), dest="solver", help=argparse.SUPPRESS)
+    parser.add_argument(
+        "--threads", action="store_true", help="ours at 1, 2, 4, 8 and 16 threads, beside the memory bandwidth"
+    )
+    parser.add_argument(
+        "--child", choices=("ours", "hj", "game", "compile", "bandwidth"), dest="solver", help=argparse.SUPPRESS
+    )
     parser.add_argument("--n", type=int, default=45, help=argparse.SUPPRESS)
     parser.add_argument("--scheme", default="weno5", help=argparse.SUPPRESS)
     parser.add_argument("--horizon", type=float, default=6.0, help=argparse.SUPPRESS)
@@ -332,11 +343,91 @@ def main() -> None:
     if args.device == "cuda":
         on_the_gpu(args.quick, args.game)
         return
+    if args.threads:
+        scaling(args.quick)
+        return
 
     if not args.game:
         compare(args.quick)
         print()
     game(args.quick)
+
+
+THREADS = (1, 2, 4, 8, 16)
+TARGET_16_OVER_2 = 6.0
+BYTES_PER_UPDATE = 44
+"""The least memory traffic of one node update (one node, one time step) of
+WENO5 + TVD-RK3 reach-avoid in float32, if every stencil neighbour comes
+from cache: stage 1 reads v and writes out (8 bytes), stages 2 and 3 read
+v and u0 and write out (12 each), the last also reads the target and the
+avoid set (8) and T* (4). Writes that first read their line (write-allocate)
+add 12 more."""
+TRIAD_N = 1 << 26
+"""Elements of each float32 array of the bandwidth probe: 256 MB, far beyond any cache."""
+
+
+def triad_gb_s(repeats: int = 5) -> float:
+    """Memory bandwidth that ``numba.get_num_threads()`` threads reach on the
+    triad ``a = b + s c`` (STREAM's, 12 bytes an element), the best of ``repeats``."""
+    import numba
+
+    @numba.njit(parallel=True, cache=True)
+    def triad(a, b, c, s):
+        for i in numba.prange(a.size):
+            a[i] = b[i] + s * c[i]
+
+    a, b, c = (np.full(TRIAD_N, v, np.float32) for v in (0.0, 1.0, 2.0))
+    triad(a, b, c, np.float32(3.0))
+    best = math.inf
+    for _ in range(repeats):
+        start = time.perf_counter()
+        triad(a, b, c, np.float32(3.0))
+        best = min(best, time.perf_counter() - start)
+    return 12 * TRIAD_N / best / 1e9
+
+
+def scaling(quick: bool) -> None:
+    """Ours on the flag return at 1, 2, 4, 8 and 16 threads (those the
+    machine has cores for), each in its own process, with the bandwidth the
+    same threads reach on the triad: whether the kernels are bound by memory."""
+    n, horizon = (21, 2.0) if quick else (45, 6.0)
+    cores = os.cpu_count() or 1
+    counts = [k for k in THREADS if k <= cores]
+    print(
+        f"flag return, {n}^4 over {horizon:g} time units, WENO5 + TVD-RK3, float32, on {cores} cores; "
+        f"traffic at the least {BYTES_PER_UPDATE} bytes a node update"
+    )
+    print(
+        f"{'threads':>7} {'seconds':>8} {'M upd/s':>8} {'vs 1':>6} {'vs 2':>6} {'GB/s moved':>10} "
+        f"{'triad GB/s':>10} {'share':>6}"
+    )
+    rates = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for k in counts:
+            env = {**os.environ, "NUMBA_NUM_THREADS": str(k)}
+            r = measure("ours", n, "weno5", horizon, 0.0, os.path.join(tmp, "set.npy"), env=env)
+            triad = measure("bandwidth", n, "weno5", horizon, 0.0, os.path.join(tmp, "unused.npy"), env=env)["gb_s"]
+            rates[k] = r["node_updates"] / r["seconds"]
+            moved = rates[k] * BYTES_PER_UPDATE / 1e9
+            against_two = f"{rates[k] / rates[2]:.2f}x" if 2 in rates else "-"
+            print(
+                f"{k:>7} {r['seconds']:>8.2f} {rates[k] / 1e6:>8.1f} {rates[k] / rates[counts[0]]:>5.2f}x "
+                f"{against_two:>6} {moved:>10.1f} {triad:>10.1f} {moved / triad:>5.0%}",
+                flush=True,
+            )
+    left = [k for k in THREADS if k > cores]
+    if left:
+        print(f"not run: {', '.join(map(str, left))} threads, on a machine of {cores} cores")
+    else:
+        ratio = rates[16] / rates[2]
+        print(
+            f"target: 16 threads at least {TARGET_16_OVER_2:g}x as fast as 2: {ratio:.2f}x, "
+            f"{'met' if ratio >= TARGET_16_OVER_2 else 'not met'}"
+        )
+    print(
+        "GB/s moved: node updates a second x the least traffic of one; share: of the triad's bandwidth at the "
+        "same threads. A share near 100 % says the kernels are bound by memory, well below it by arithmetic."
+    )
 
 
 def compare(quick: bool) -> None:
