@@ -180,17 +180,25 @@ def test_an_unknown_scenario_is_named(tmp_path):
 
 
 def test_study_summaries_count_goes_false_goes_and_real_windows():
+    from bearcat.cli.study import _goes_table
     from bearcat.scenarios.variants import vary
     from bearcat.studies.thesis import study_tasks, summarise
 
+    won, caught, late = "attacker returned the flag", "attacker captured", "time limit of 120 s"
     rows = [
-        {"scenario": "s", "netem": "wifi", "winner": "attacker", "went_at": 3.0, "true_value": -0.5},
-        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": 4.0, "true_value": 0.7},
-        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": 5.0, "true_value": -0.1},
-        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": None, "true_value": None},
+        {"scenario": "s", "netem": "wifi", "winner": "attacker", "went_at": 3.0, "true_value": -0.5, "reason": won},
+        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": 4.0, "true_value": 0.7, "reason": caught},
+        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": 5.0, "true_value": -0.1, "reason": late},
+        {"scenario": "s", "netem": "wifi", "winner": "defender", "went_at": None, "true_value": None, "reason": caught},
     ]
     (row,) = summarise(rows)
     assert (row["games"], row["attacker_wins"], row["goes"], row["false_goes"]) == (4, 1, 3, 2)
+    # A false go ends caught or out of time; a game without a go counts in neither.
+    assert (row["false_goes_caught"], row["false_goes_out_of_time"]) == (1, 1)
+    # The printed table keeps its columns whatever the length of a guidance's name.
+    header, line = _goes_table([dict(row, guidance="calibrated, no calibration")]).splitlines()
+    assert line.index("wifi/tcp") == header.index("network")
+    assert line.split()[-4:-2] == ["1", "1"] and header.split()[-8:-6] == ["caught", "timed"]
     assert (row["goes_really_open"], row["really_open_won"], row["median_go_time"]) == (2, 1, 4.0)
     assert row["false_go_rate"] == pytest.approx(2 / 3, abs=1e-3)
     tasks = study_tasks("go-no-go", 3, 10, ["ideal", "3g"])  # 4 guidance x 2 profiles x 3 seeds

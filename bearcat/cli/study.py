@@ -223,15 +223,17 @@ def _rate(count: int, games: int, interval) -> str:
 
 
 def _goes_table(rows) -> str:
+    w = max(len("guidance"), *(len(r["guidance"]) for r in rows)) + 2
     lines = [
-        f"{'guidance':<18}{'network':<17}{'attacker wins (95%)':>24}{'goes':>6}{'false goes (95%)':>24}"
-        f"{'really open':>13}{'of them won':>13}"
+        f"{'guidance':<{w}}{'network':<17}{'attacker wins (95%)':>24}{'goes':>6}{'false goes (95%)':>24}"
+        f"{'caught':>8}{'timed out':>11}{'really open':>13}{'of them won':>13}"
     ]
     for r in rows:
         false = "-" if not r["goes"] else _rate(r["false_goes"], r["goes"], r["false_go_interval"])
         lines.append(
-            f"{r['guidance']:<18}{r['netem'] + '/' + r['transport']:<17}"
+            f"{r['guidance']:<{w}}{r['netem'] + '/' + r['transport']:<17}"
             f"{_rate(r['attacker_wins'], r['games'], r['attacker_win_interval']):>24}{r['goes']:>6}{false:>24}"
+            f"{r['false_goes_caught']:>8}{r['false_goes_out_of_time']:>11}"
             f"{r['goes_really_open']:>13}{r['really_open_won']:>13}"
         )
     return "\n".join(lines)
@@ -239,13 +241,14 @@ def _goes_table(rows) -> str:
 
 def _holding_table(rows) -> str:
     guidance = list(dict.fromkeys(r["guidance"] for r in rows))
-    lines = [f"{'network':<17}{'report Hz':>10}" + "".join(f"{g:>26}" for g in guidance)]
+    w = max(26, *(len(g) + 2 for g in guidance))
+    lines = [f"{'network':<17}{'report Hz':>10}" + "".join(f"{g:>{w}}" for g in guidance)]
     cells = {(r["netem"] + "/" + r["transport"], r["rate"], r["guidance"]): r for r in rows}
     for network, rate in dict.fromkeys((n, h) for n, h, _ in cells):
         line = f"{network:<17}{rate:>10g}"
         for g in guidance:
             r = cells.get((network, rate, g))
-            line += f"{'-' if r is None else _rate(r['defender_wins'], r['games'], r['defender_win_interval']):>26}"
+            line += f"{'-' if r is None else _rate(r['defender_wins'], r['games'], r['defender_win_interval']):>{w}}"
         lines.append(line)
     return "defender holds (defender wins, 95% interval)\n" + "\n".join(lines)
 

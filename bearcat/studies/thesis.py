@@ -55,6 +55,10 @@ STUDY_ABLATIONS = {
 """The parts whose ablation a study offers: the defender's holding uses no
 calibration, the attacker's go no belief quantile."""
 
+CAUGHT, OUT_OF_TIME = " captured", "time limit of "
+"""How the referee's reason for the end of a game ends when the defender
+caught the attacker, and begins when the clock ran out."""
+
 MARKING = (3.0, 6.0, 9.0, 12.0)
 """The unaided defender's marking distance (m in front of the attacker on its run home)."""
 REACTION = (0.2, 0.4, 0.7, 1.0, 1.2)
@@ -282,9 +286,10 @@ def summarise(results, by=()) -> list[dict]:
     """Per scenario, profile, transport and the labels named in ``by``:
     games, wins of each side with 95 % intervals, goes (the attacker
     committed), goes that won, false goes (committed, then lost) and their
-    rate with its interval; goes whose window was really there (the
-    attacker's true position wins against the defender's) and how many of
-    those the attacker won."""
+    rate with its interval, split into those the defender caught and those
+    the time limit ended on the way home (a late go, not a wrong one); goes
+    whose window was really there (the attacker's true position wins
+    against the defender's) and how many of those the attacker won."""
     groups = defaultdict(list)
     for r in results:
         labels = r.get("labels") or {}
@@ -297,6 +302,7 @@ def summarise(results, by=()) -> list[dict]:
         held = sum(g["winner"] == "defender" for g in games)
         went = [g for g in games if g["went_at"] is not None]
         good = sum(g["winner"] == "attacker" for g in went)
+        lost = [g for g in went if g["winner"] != "attacker"]
         real = [g for g in went if g.get("true_value") is not None and g["true_value"] <= 0]
         rows.append(
             {
@@ -316,6 +322,8 @@ def summarise(results, by=()) -> list[dict]:
                 "false_goes": len(went) - good,
                 "false_go_rate": round((len(went) - good) / len(went), 3) if went else None,
                 "false_go_interval": _interval(len(went) - good, len(went)) if went else None,
+                "false_goes_caught": sum(g["reason"].endswith(CAUGHT) for g in lost),
+                "false_goes_out_of_time": sum(g["reason"].startswith(OUT_OF_TIME) for g in lost),
                 "median_go_time": _median([g["went_at"] for g in went]),
                 "goes_really_open": len(real),
                 "really_open_won": sum(g["winner"] == "attacker" for g in real),
