@@ -10,7 +10,7 @@ from shapely.geometry import Point, box
 
 from bearcat.agents.navigation import LOOK_AHEAD, Navigator, navigator
 from bearcat.maps import Map
-from bearcat.solvers.descent import descend
+from bearcat.solvers.descent import aim_ahead, descend
 
 
 def walled_map() -> Map:
@@ -47,6 +47,14 @@ def test_it_goes_round_the_wall_and_stops_inside_the_goal():
     assert nav.toward(goal, np.array([34.0, 5.0])) is None  # its edge covers
     assert nav.toward((35.0, 5.0), (35.0, 5.0)) is None
     assert shapely.is_prepared(goal)  # asked for ten times a second: prepared once
+
+
+def test_the_aim_is_none_inside_a_wall_and_the_start_itself_on_the_goal():
+    nav = Navigator(walled_map(), 0.5)
+    phi, seeds = nav._field(box(34, 2, 38, 8))
+    assert aim_ahead(nav.grid, phi, seeds, np.array([20.0, 10.0]), nav._ahead, LOOK_AHEAD) is None
+    aim, points = aim_ahead(nav.grid, phi, seeds, np.array([36.0, 5.0]), nav._ahead, LOOK_AHEAD)
+    assert points == 1 and np.array_equal(aim, [36.0, 5.0])
 
 
 def test_games_on_one_map_share_its_navigator_while_the_map_lives():

@@ -20,7 +20,7 @@ from shapely.geometry.base import BaseGeometry
 from bearcat.maps import Map, rasterize
 from bearcat.maps.raster import covered
 from bearcat.solvers import fmm
-from bearcat.solvers.descent import descend
+from bearcat.solvers.descent import aim_ahead
 
 LOOK_AHEAD = 2.0  # metres along the path the returned direction aims at
 
@@ -53,16 +53,12 @@ class Navigator:
         i, j = self.grid.nearest_index(p)
         if not math.isfinite(phi[i, j]):
             return None
-        try:
-            descent = descend(self.grid, phi, p, seeds=seeds, steps=self._ahead)
-            path, along = descent.points, _lengths(descent.points)
-            if along[-1] < LOOK_AHEAD and len(path) == self._ahead + 1:  # cut short of the look-ahead
-                path = descend(self.grid, phi, p, seeds=seeds).points
-                along = _lengths(path)
-        except ValueError:
+        found = aim_ahead(self.grid, phi, seeds, p, self._ahead, LOOK_AHEAD)
+        if found is None:
             return None
-        k = int(np.searchsorted(along, LOOK_AHEAD))
-        aim = path[min(k, len(path) - 1)] if len(path) > 1 else np.asarray(goal_geometry.centroid.coords[0])
+        aim, points = found
+        if points == 1:
+            aim = np.asarray(goal_geometry.centroid.coords[0])
         d = aim - p
         n = math.hypot(d[0], d[1])
         return d / n if n > 1e-9 else None
@@ -91,7 +87,7 @@ class Navigator:
                 seeds &= self.raster.free
             initial = np.where(seeds, 0.0, np.inf)
             phi = fmm.travel_time(self.raster.speed, self.grid.spacing, initial)
-            found = (phi, seeds)
+            found = (np.ascontiguousarray(phi, np.float64), np.ascontiguousarray(seeds, np.bool_))
             self._fields[key] = found
         return found
 
@@ -106,9 +102,3 @@ def navigator(game_map: Map) -> Navigator:
     if found is None:
         found = _navigators[game_map] = Navigator(game_map)
     return found
-
-
-def _lengths(path: np.ndarray) -> np.ndarray:
-    """The distance along ``path`` to each of its points."""
-    steps = np.diff(path, axis=0)
-    return np.cumsum(np.concatenate(([0.0], np.hypot(steps[:, 0], steps[:, 1]))))

@@ -20,7 +20,7 @@ from bearcat.solvers.errors import InputError, format_point
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.interpolation import bilinear, upwind_gradient
 
-__all__ = ["Descent", "descend", "descend_steps"]
+__all__ = ["Descent", "aim_ahead", "descend", "descend_steps"]
 
 
 @dataclass(frozen=True)
@@ -118,6 +118,24 @@ def descend_steps(grid: Grid, phi: np.ndarray, start: np.ndarray, max_steps: int
     return np.column_stack([xs * hx + lx, ys * hy + ly])
 
 
+def aim_ahead(grid: Grid, phi: np.ndarray, stop: np.ndarray, start: np.ndarray, steps: int, distance: float):
+    """Where a walker at ``start`` steers: the first point of its
+    steepest-descent path (``descend`` with ``seeds=stop``) at least
+    ``distance`` metres along it, or the path's end if it is shorter. The
+    path is traced ``steps`` steps, and to its end only where that falls
+    short. Returns the point and the path's number of points, or None where
+    ``start`` is on no finite value. Point for point what ``descend`` and a
+    search along its lengths give, without their checks and arrays, for
+    walkers that ask ten times a second: ``phi`` float64 and ``stop`` bool,
+    both C-contiguous and of the grid's shape, ``start`` on the grid."""
+    lx, ly = (float(c) for c in grid.lo)
+    hx, hy = (float(h) for h in grid.spacing)
+    fx, fy = (start[0] - lx) / hx, (start[1] - ly) / hy  # grid.fractional_index's arithmetic
+    full = 4 * grid.size + 16
+    ax, ay, points = _aim(phi, stop, lx, ly, hx, hy, fx, fy, min(steps, full), full, distance)
+    return None if points == 0 else (np.array([ax, ay]), points)
+
+
 # --------------------------------------------------------------------------- kernels
 
 
@@ -205,3 +223,33 @@ def _grow(a):
     for k in range(a.size):
         b[k] = a[k]
     return b
+
+
+@numba.njit(cache=True)
+def _aim(phi, stop, lx, ly, hx, hy, px, py, steps, full, distance):
+    """``aim_ahead``'s work: the aim point and the path's length in points (0: no path)."""
+    xs, ys, _, status = _descend(phi, stop, hx, hy, px, py, np.int64(steps))
+    if status == _START_INVALID:
+        return 0.0, 0.0, 0
+    along = _along(xs, ys, lx, ly, hx, hy)
+    if along[-1] < distance and xs.size == steps + 1:  # cut short of the look-ahead
+        xs, ys, _, _ = _descend(phi, stop, hx, hy, px, py, np.int64(full))
+        along = _along(xs, ys, lx, ly, hx, hy)
+    k = xs.size - 1
+    for i in range(xs.size):  # the first at or past ``distance``, as a search on the sorted lengths
+        if along[i] >= distance:
+            k = i
+            break
+    return lx + xs[k] * hx, ly + ys[k] * hy, xs.size
+
+
+@numba.njit(cache=True)
+def _along(xs, ys, lx, ly, hx, hy):
+    """The distance along the path of fractional indices ``xs, ys`` to each of its points, in metres."""
+    along = np.empty(xs.size)
+    along[0] = 0.0
+    for i in range(1, xs.size):
+        dx = (lx + xs[i] * hx) - (lx + xs[i - 1] * hx)
+        dy = (ly + ys[i] * hy) - (ly + ys[i - 1] * hy)
+        along[i] = along[i - 1] + math.hypot(dx, dy)
+    return along
