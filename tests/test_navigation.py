@@ -1,7 +1,10 @@
 """A walker's way to its goal: the direction toward the point a few metres
 along the shortest path, traced only as far as that point."""
 
+import json
 import math
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -70,3 +73,39 @@ def test_games_on_one_map_share_its_navigator_while_the_map_lives():
     del game_map, shared
     gc.collect()
     assert gone() is None
+
+
+WALKED = """
+import json
+import numpy as np
+from shapely.geometry import box
+from bearcat.maps import load_map
+from bearcat.agents.navigation import Navigator, navigator
+from bearcat.solvers import descent
+
+descent.compile_kernels()  # before any game, as the launcher's child does
+counts = lambda: len(descent._aim.signatures)  # what it calls is compiled into it
+warmed = counts()
+moved = 0
+for game_map, goal in ((load_map("campus-200"), (120.0, 60.0)), (load_map("field-50"), box(20, 40, 30, 48))):
+    nav = navigator(game_map)
+    for x in np.linspace(*game_map.bounds[0::2], 9):
+        for y in np.linspace(*game_map.bounds[1::2], 9):
+            moved += nav.toward(goal, np.array([x, y])) is not None
+short = Navigator(load_map("field-50"))
+short._ahead = 1  # a trace cut short of the look-ahead, traced again to the end
+moved += short.toward((25.0, 45.0), np.array([5.0, 5.0])) is not None
+print(json.dumps({"warmed": warmed, "after": counts(), "moved": moved}))
+"""
+
+
+def test_the_kernel_compiled_on_a_blank_grid_serves_every_walker():
+    """After ``descent.compile_kernels`` (on a three-node grid, as ``bearcat
+    run`` does while it solves) no walker on a real map compiles a kernel
+    again, so none stands still at the start of its first game. A process
+    of its own, so no other test's calls count."""
+    done = subprocess.run([sys.executable, "-c", WALKED], capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, done.stderr
+    found = json.loads(done.stdout.strip().splitlines()[-1])
+    assert found["moved"] > 100, found
+    assert found["warmed"] == found["after"] == 1, found

@@ -13,7 +13,7 @@ from bearcat.cli.writing import make_directory, writing
 from bearcat.runtime.peer_spec import ROLES
 from bearcat.runtime.peers import NETWORKS
 from bearcat.runtime.run_directory import fresh
-from bearcat.runtime.solve_ahead import SolveBehind, compile_queries_behind
+from bearcat.runtime.solve_ahead import SolveBehind, compile_kernels_behind
 from bearcat.scenarios.faults import GROUND, load_faults
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
 
@@ -283,7 +283,7 @@ def run_live(args) -> int:
 
     awaited = None if args.wait_for_sets else awaited_sets(scenario)
     behind = None
-    compiling = compile_queries_behind() if unsolved(scenario) else None  # numba's cache may be empty too
+    compiling = compile_kernels_behind() if unsolved(scenario) else None  # numba's cache may be empty too
     try:
         presolve(scenario, netem, provisional=awaited is not None)
         if awaited is not None:

@@ -111,24 +111,27 @@ class SolveBehind:
         self._process.join()
 
 
-def compile_queries_behind():
+def compile_kernels_behind():
     """A child process, on otherwise idle processors, that fills numba's
     cache with the guidance's query kernels (``ctf_queries.compile_kernels``)
-    while the launcher compiles and runs the solver on one processor, so a
-    ground station peer of a fresh clone loads them in a third of a second
-    instead of compiling them for two before it says it is up. Join it or
-    terminate it; it dies with this process in any case."""
+    and the walkers' look-ahead (``descent.compile_kernels``) while the
+    launcher compiles and runs the solver on one processor. So a ground
+    station peer of a fresh clone loads its kernels in a third of a second
+    instead of compiling them for two before it says it is up, and a walker
+    does not stand still for three at the start of its first game. Join it
+    or terminate it; it dies with this process in any case."""
     context = multiprocessing.get_context("spawn")
-    process = context.Process(target=_compile_queries, name="compile the guidance's queries", daemon=True)
+    process = context.Process(target=_compile_kernels, name="compile the peers' kernels", daemon=True)
     process.start()
     return process
 
 
-def _compile_queries() -> None:
+def _compile_kernels() -> None:
     _idle()
-    from bearcat.solvers.ctf_queries import compile_kernels
+    from bearcat.solvers import ctf_queries, descent
 
-    compile_kernels()
+    ctf_queries.compile_kernels()
+    descent.compile_kernels()
 
 
 def _idle() -> None:

@@ -20,7 +20,7 @@ from bearcat.solvers.errors import InputError, format_point
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.interpolation import bilinear, upwind_gradient
 
-__all__ = ["Descent", "aim_ahead", "descend", "descend_steps"]
+__all__ = ["Descent", "aim_ahead", "compile_kernels", "descend", "descend_steps"]
 
 
 @dataclass(frozen=True)
@@ -134,6 +134,14 @@ def aim_ahead(grid: Grid, phi: np.ndarray, stop: np.ndarray, start: np.ndarray, 
     full = 4 * grid.size + 16
     ax, ay, points = _aim(phi, stop, lx, ly, hx, hy, fx, fy, min(steps, full), full, distance)
     return None if points == 0 else (np.array([ax, ay]), points)
+
+
+def compile_kernels() -> None:
+    """Load or compile ``aim_ahead``'s kernel on a grid of three nodes a
+    side. A kernel is compiled per argument type, not per grid, so a process
+    that runs this fills numba's cache for every walker after it."""
+    grid = Grid((0.0, 0.0), (1.0, 1.0), (3, 3))
+    aim_ahead(grid, np.zeros(grid.shape), np.zeros(grid.shape, np.bool_), np.array([0.5, 0.5]), 1, 1.0)
 
 
 # --------------------------------------------------------------------------- kernels
