@@ -83,7 +83,10 @@ def test_a_partition_on_a_kernel_network_is_noticed_at_the_lease_and_healed(tmp_
     assert done.returncode == 0, done.stdout + done.stderr
     (case,) = json.loads((tmp_path / "kernel" / "report.json").read_text())["cases"]
     seen = float(case["detected"].split()[0])
-    assert 3.0 <= seen <= 3.0 + 2.0  # the lease, then the router's sweep: real packets, really dropped
+    # Real packets, really dropped: the link's 3 s lease runs out, and the router sweeps. The lease
+    # runs from the last packet that got through, which may precede the cut by up to Zenoh's
+    # keep-alive interval (a quarter of the lease) when a fix was lost or late at the cut.
+    assert 3.0 * 3 / 4 <= seen <= 3.0 + 2.0
     # The report gives the delay to 0.01 s and the evidence to 0.1 s, each rounded from the same time.
     said = re.search(r"outage defender seen gone after (\d+\.\d) s \(lease 3 s\)", case["evidence"]["detection"])
     assert said is not None and abs(float(said.group(1)) - seen) <= 0.05 + 0.005, case["evidence"]["detection"]
