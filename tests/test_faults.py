@@ -81,7 +81,7 @@ def sent(events, kind, agent=None):
         ),
         (
             {"kind": "kill", "target": "gs", "after": "defender.goes"},
-            "fault[0].after: agent defender never goes: its behaviour is direct",
+            "fault[0].after: agent defender never goes: its behaviour direct does not commit to a run",
         ),
         ({"kind": "kill", "target": "gs", "after": "lunch"}, "fault[0].after: 'lunch' is not an event"),
     ],
@@ -278,7 +278,7 @@ def test_a_fault_counts_from_the_event_it_names(tmp_path):
     (fault,) = outcome.faults
     assert (
         fault["t"] == pytest.approx(happened["t"] + 0.5, abs=1e-9)
-        and 0.0 <= happened["t"] - outcome.notes["attacker.went_at"] <= 0.1 + 1e-9
+        and 0.0 <= happened["t"] - outcome.notes["attacker.committed_at"] <= 0.1 + 1e-9
     )
 
 

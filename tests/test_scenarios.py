@@ -25,10 +25,10 @@ def test_the_studies_scenarios_are_built_in():
     [
         (
             ('behaviour = "fake-out"', 'behaviour = "fakeout"'),
-            "agent[0].behaviour: 'fakeout' is not one of 'follow-guidance', 'direct', 'fake-out', 'go-no-go', "
-            "'waypoints', 'patrol', 'keyboard'",
+            "agent[0].behaviour: there is no behaviour 'fakeout'; the behaviours are follow-guidance, direct, "
+            "fake-out, go-no-go, waypoints, patrol, keyboard, or name one of your own as module:attribute",
         ),
-        (("speed = 3.0", "sped = 3.0"), "agent[0]: unknown key 'sped'; the keys there are behaviour, id, team, start"),
+        (("speed = 3.0", "sped = 3.0"), "agent[0]: unknown key 'sped'; the keys there are id, team, start, speed, behaviour"),
         (('map = "field-50"', 'map = "field-5"'), "scenario.map: there is no built-in map 'field-5'"),
         (
             ('netem = "wifi"', 'netem = "lte"'),
@@ -54,7 +54,10 @@ def test_the_studies_scenarios_are_built_in():
             ("capture_radius = 2.5", "capture_radious = 2.5"),
             "rules: unknown key 'capture_radious'; the keys there are capture_radius,",
         ),
-        (('behaviour = "fake-out"', 'behavior = "fake-out"'), "agent[0].behaviour: must be given, as one of"),
+        (
+            ('behaviour = "fake-out"', 'behavior = "fake-out"'),
+            "agent[0]: unknown key 'behavior'; the keys there are id, team, start, speed, behaviour",
+        ),
     ],
 )
 def test_a_mistake_names_the_file_and_the_key(change, culprit):
@@ -127,7 +130,7 @@ def test_every_number_has_its_bounds(change, culprit):
 
 def test_options_of_a_behaviour_are_checked():
     text = scenario_text(attacker_behaviour="go-no-go")
-    with pytest.raises(ScenarioError, match=r"agent\[0\].options: must be given, as a table with 'hold'$"):
+    with pytest.raises(ScenarioError, match=r"agent\[0\].options.hold: must be given, as \[east, north\] in metres$"):
         parse_scenario(text, source="game.toml")
     text = text.replace("aided = true", "aided = true\noptions = { hold = [20.0, 20.0], wait = 3 }", 1)
     with pytest.raises(ScenarioError, match=r"agent\[0\].options: unknown key 'wait'; the keys there are hold, fresh"):
@@ -277,8 +280,8 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
     assert [a.fix_rate for a in changed.agents] == [5.0, 5.0]
     assert changed.agent("defender").reaction == 1.2
     assert changed.agent("attacker").reaction == base.agent("attacker").reaction
-    assert changed.agent("defender").options.standoff == 3.0
-    assert changed.agent("defender").options.lead == base.agent("defender").options.lead
+    assert changed.behaviour_of("defender").options.standoff == 3.0
+    assert changed.behaviour_of("defender").options.lead == base.behaviour_of("defender").options.lead
     # Its TOML is what a peer fetching it gets: it reads back as the same scenario.
     again = parse_scenario(changed.text, game_map=changed.map)
     assert again.agents == changed.agents and again.uncertainty == "worst-case"

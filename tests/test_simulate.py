@@ -314,8 +314,9 @@ def test_against_real_players_the_referee_judges_on_fixes_and_says_so():
 
 def test_keys_steer_a_keyboard_walker_and_space_stops_it():
     from bearcat.agents.human.behaviours import Keyboard
+    from bearcat.agents.options import NoOptions
 
-    keyboard = Keyboard()
+    keyboard = Keyboard(NoOptions(), np.random.default_rng(0))
     assert keyboard.decide(0.0, None, None, None) is None
     assert keyboard.press("up") and keyboard.decide(0.0, None, None, None).tolist() == [0.0, 1.0]
     assert keyboard.press("a") and keyboard.decide(0.0, None, None, None).tolist() == [-1.0, 0.0]

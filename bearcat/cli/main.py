@@ -35,6 +35,7 @@ COMMANDS = {
     "run": (("live",), "play a scenario live: every peer its own process over Zenoh"),
     "view": (("live",), "replay a run's Rerun recording"),
     "check": (("check",), "say which invariants a run directory shows held"),
+    "plugins": (("plugins",), "list the plug-ins scenarios may name, or check what one names"),
     "faults": (("faults",), "run a fault-injection suite and check every run"),
     "peer": (("live",), "start one peer by hand (a person at a keyboard, or against real hardware)"),
     "phone": (("live",), "let a person play from a real phone's browser"),
@@ -58,6 +59,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
     only those that can only mean a path the user gave, or a helper program
     (the Rerun viewer) that cannot run here, are; a run or cache directory
     that refuses a write arrives as ``WriteError``."""
+    from bearcat.agents.registry import PluginError
     from bearcat.bus.errors import BusError
     from bearcat.figures.screenshot import ScreenshotError
     from bearcat.maps.errors import MapError
@@ -80,6 +82,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
         KernelError,
         BusError,
         BatchInterrupted,
+        PluginError,
         FileNotFoundError,
         IsADirectoryError,
         PermissionError,

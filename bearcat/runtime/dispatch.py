@@ -18,7 +18,8 @@ second in the event log (``over-budget``), so it cannot fill the disk. So is
 what a live peer's session refused to believe, by the sender it claimed.
 
 What an agent did on its own and keeps in its ``events`` list (a UAV's
-failsafe, its landing) is recorded as ``did`` events, as it happens.
+failsafe, its landing) is recorded as ``did`` events, as it happens; a
+plug-in's fault that its guard kept there, as a ``plugin`` event.
 
 An agent whose peer's clock is wrong (a clock fault) is handed its own
 time (``clocks``); the record keeps the runtime's.
@@ -31,6 +32,7 @@ from collections import Counter
 from collections.abc import Callable
 from typing import TYPE_CHECKING
 
+from bearcat.agents.guard import PluginFault
 from bearcat.agents.protocol import Agent, Send
 from bearcat.bus import keys
 from bearcat.bus.budget import SenderBudget
@@ -45,6 +47,7 @@ log = logging.getLogger(__name__)
 
 FAILED = "failed"  # the event kind of an agent's exception in the event log
 DID = "did"  # the event kind of what an agent did on its own
+PLUGIN = "plugin"  # the event kind of a plug-in's fault (agents.guard)
 
 
 class Dispatcher:
@@ -55,6 +58,7 @@ class Dispatcher:
         self.record = record
         self.now = now
         self.failures: Counter[str] = Counter()  # agent -> exceptions raised
+        self.plugin_faults: Counter[str] = Counter()  # "agent/plug-in/fault" -> how many
         self.clocks: dict[str, Callable[[float], float]] = {}  # agent -> its own time from the runtime's
         self._sessions: dict[str, LocalSession | ZenohSession] = {}
         self._inboxes: dict[str, Inbox] = {}
@@ -135,8 +139,14 @@ class Dispatcher:
     def _publish(self, agent: Agent, sends: list[Send]) -> None:
         did = getattr(agent, "events", None)
         if did:
-            for t, what in did[self._told.get(agent.name, 0) :]:
-                self.record.note(self.now(), DID, agent=agent.name, at=t, what=what)
+            for event in did[self._told.get(agent.name, 0) :]:
+                if isinstance(event, PluginFault):
+                    fields = {k: v for k, v in vars(event).items() if k != "t"}
+                    self.record.note(self.now(), PLUGIN, at=event.t, **fields)
+                    self.plugin_faults[f"{event.agent}/{event.plugin}/{event.fault}"] += 1
+                else:
+                    t, what = event
+                    self.record.note(self.now(), DID, agent=agent.name, at=t, what=what)
             self._told[agent.name] = len(did)
         session = self._sessions[agent.name]
         for s in sends:

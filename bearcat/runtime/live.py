@@ -31,6 +31,7 @@ import logging
 import signal
 import threading
 import time
+import typing
 from collections.abc import Callable
 from contextlib import closing
 from dataclasses import dataclass
@@ -39,6 +40,8 @@ from typing import Any
 
 from bearcat.agents.ground_station.ctf_cache import cached
 from bearcat.agents.ground_station.event_log import EventLog
+from bearcat.agents.human.agent import HumanAgent
+from bearcat.agents.human.behaviour import TAKES_KEYS, TakesKeys
 from bearcat.bus import keys
 from bearcat.bus.clock import WallClock
 from bearcat.bus.codec import Inbox
@@ -375,9 +378,11 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
             transport=transport,
             lease=scenario.lease,
         )
-        keyboard = [a for a in agents if getattr(a, "behaviour", None) is not None and a.behaviour.name == "keyboard"]
+        keyboard = [
+            a for a in agents if isinstance(a, HumanAgent) and TAKES_KEYS in a.traits and a.behaviour is not None
+        ]
         if keyboard:
-            _read_keys(keyboard[0].behaviour)
+            _read_keys(typing.cast(TakesKeys, keyboard[0].behaviour))
         peer = run_peer(
             agents,
             session,
@@ -467,7 +472,7 @@ def _walker(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
     from bearcat.scenarios.cast import build_cast
 
     _known(scenario, spec.id, scenario.ids, "agent")
-    players = build_cast(scenario, profile, seed, people=[spec.id], ground=False)
+    players = build_cast(scenario, profile, seed, people=[spec.id], ground=False, clock=time.perf_counter)
     return _Cast([players.people[spec.id]], players)
 
 
@@ -601,8 +606,9 @@ def fetch_scenario(
     return parse_scenario(text.decode(), source=f"the scenario of game {game}", game_map=game_map)
 
 
-def _read_keys(behaviour) -> None:
-    """Feed arrow keys and WASD from this terminal to a keyboard behaviour, on a thread."""
+def _read_keys(behaviour: TakesKeys) -> None:
+    """Feed arrow keys and WASD from this terminal to a behaviour that takes keys, on a thread;
+    a key it fails on is logged and the next is read."""
     import sys
     import termios
     import threading
@@ -625,7 +631,10 @@ def _read_keys(behaviour) -> None:
                     ch = "space"
                 if ch in ("q", "\x03", ""):
                     break
-                behaviour.press(ch.lower())
+                try:
+                    behaviour.press(ch.lower())
+                except Exception:
+                    log.exception("the behaviour failed on key %r; reading on", ch)
         finally:
             termios.tcsetattr(fd, termios.TCSADRAIN, saved)
 

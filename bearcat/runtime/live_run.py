@@ -36,6 +36,7 @@ from pathlib import Path
 import msgspec
 
 from bearcat.agents.ground_station.event_log import EventLog, read_events
+from bearcat.agents.human.behaviour import TAKES_KEYS
 from bearcat.bus import keys
 from bearcat.bus.addresses import reachable
 from bearcat.bus.budget import SenderBudget
@@ -448,7 +449,7 @@ def _joining(scenario: Scenario, name: str, phone: bool, command: list[str], *, 
         what = f"UAV {name} flies from its own computer"
         notes.append(f"--vehicle: its autopilot's MAVLink URL, e.g. {VEHICLE} or serial:///dev/ttyACM0:57600")
     else:
-        keyboard = scenario.agent(name).behaviour == "keyboard"
+        keyboard = scenario.behaviour_of(name).entry.has(TAKES_KEYS)
         what = f"agent {name} {'is driven from a keyboard' if keyboard else 'joins by hand'}"
     if elsewhere:
         notes.append(f"--certs: the directory on that machine holding ca.pem, {name}.pem and {name}.key from {certs}")

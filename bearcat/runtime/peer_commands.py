@@ -11,6 +11,7 @@ from __future__ import annotations
 import socket
 import sys
 
+from bearcat.agents.human.behaviour import TAKES_KEYS
 from bearcat.scenarios.schema import Scenario
 
 BEARCAT = (sys.executable, "-m", "bearcat")  # this very installation, whatever is on the PATH
@@ -41,5 +42,5 @@ def vehicle_command(scenario: Scenario, k: int, port: int) -> list[str]:
 
 
 def started_by_hand(scenario: Scenario, joins: tuple[str, ...]) -> set[str]:
-    """The agents whose peers a person starts: those driven from a keyboard, and those named in ``joins``."""
-    return set(joins) | {a.id for a in scenario.agents if a.behaviour == "keyboard"}
+    """The agents whose peers a person starts: those whose behaviour takes keys, and those named in ``joins``."""
+    return set(joins) | {a.id for a in scenario.agents if scenario.behaviour_of(a.id).entry.has(TAKES_KEYS)}

@@ -60,6 +60,7 @@ class Outcome:
     counts: dict[str, int] = field(default_factory=dict)
     drops: dict[str, dict[str, int]] = field(default_factory=dict)
     failures: dict[str, int] = field(default_factory=dict)
+    plugin_faults: dict[str, int] = field(default_factory=dict)  # "agent/plug-in/fault" -> how many (agents.guard)
     notes: dict = field(default_factory=dict)
     faults: list[dict] = field(default_factory=list)  # each fault applied: its index, kind, peers and time
 
@@ -241,6 +242,7 @@ def simulate(
         counts=dict(sorted(record.counts.items())),
         drops=dispatch.drops,
         failures=dict(sorted(dispatch.failures.items())),
+        plugin_faults=dict(sorted(dispatch.plugin_faults.items())),
         notes=_notes(players),
         faults=[] if injector is None else injector.applied,
     )
@@ -253,14 +255,12 @@ def simulate(
 
 def _notes(players) -> dict:
     """What a study needs to know of a game besides its outcome: when a
-    go-no-go attacker committed or a fake-out went, when the attacking side
+    committing behaviour (a go-no-go attacker, a fake-out) went, when the attacking side
     first saw the defender and by what means."""
     notes = {}
     for name, person in players.people.items():
-        b = person.behaviour
-        for attribute in ("committed_at", "went_at"):
-            if getattr(b, attribute, None) is not None:
-                notes[f"{name}.{attribute}"] = getattr(b, attribute)
+        if person.committed_at is not None:
+            notes[f"{name}.committed_at"] = person.committed_at
     for tasker in players.tasking:
         picture = tasker.picture
         if picture.found_at is not None:

@@ -33,11 +33,13 @@ from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.agents.ground_station.sight import Sight
 from bearcat.agents.ground_station.tracker import Motion, Trackers
 from bearcat.agents.ground_station.uav_tasking import Uav, UavTasker
-from bearcat.agents.human import behaviours
+from bearcat.agents.guard import Guard
 from bearcat.agents.human.agent import HumanAgent
+from bearcat.agents.human.behaviour import Situation
 from bearcat.agents.human.phone import Phone
 from bearcat.agents.human.walker import Walker
 from bearcat.agents.navigation import Navigator, navigator
+from bearcat.agents.registry import Entry
 from bearcat.agents.uav.agent import UavAgent
 from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.autopilot import SimulatedAutopilot
@@ -130,6 +132,7 @@ def build_cast(
     autopilots=None,
     uav_truth: bool = True,
     provisional: bool = False,
+    clock=None,
 ) -> Cast:
     """The agents of ``scenario``: the people named in ``people`` and the
     UAVs named in ``uavs`` (default: all of both if ``people`` is None, else
@@ -141,7 +144,9 @@ def build_cast(
     service and UAV tasking. With ``provisional``, a capture-the-flag
     ground station whose sets are not in the cache answers from coarser
     ones, solved at once, and names the sets it awaits (``Cast.awaited``);
-    the other games solve in well under a second and ignore it."""
+    the other games solve in well under a second and ignore it. ``clock``
+    is what the people's behaviours are held to their budget on (live runs:
+    the wall clock; None, in simulation: no budget, see ``agents.guard``)."""
     if scenario.game not in GAMES:
         raise ScenarioError(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
@@ -151,7 +156,7 @@ def build_cast(
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
     flown = ([u.id for u in scenario.uavs] if people is None else []) if uavs is None else list(uavs)
-    crowd = {a: game.person(scenario.agent(a), profile, seed) for a in chosen}
+    crowd = {a: game.person(scenario.agent(a), profile, seed, clock) for a in chosen}
     autopilots = dict(autopilots or {})
     fleet = {}
     for u in flown:
@@ -383,16 +388,16 @@ class _CtfGame:
             speed=spec.speed,
         )
 
-    def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
+    def person(self, spec, profile: Profile, seed: int, clock=None) -> HumanAgent:
         if self._navigator is None:
             self._navigator = navigator(self.scenario.map)
         attacking = spec.team == "attacker"
         opponent = self.defender if attacking else self.attacker
         forbidden = None if attacking else self.flag.union(self.home)
-        situation = behaviours.Situation(
-            spec.id, spec.team, (opponent.id,), self.goals[self.phase], forbidden, self._navigator
+        situation = Situation(spec.id, spec.team, (opponent.id,), self.goals[self.phase], forbidden, self._navigator)
+        return _person(
+            self.scenario, spec, profile, seed, situation, self.goals, self.phase, keep_out=forbidden, clock=clock
         )
-        return _person(self.scenario, spec, profile, seed, situation, self.goals, self.phase, keep_out=forbidden)
 
 
 class _PursuitGame:
@@ -433,12 +438,12 @@ class _PursuitGame:
         advisor = PursuitAdvisor(s.map, evader=self.evader.id, pursuers=[p.id for p in self.pursuers])
         return _service(s, advisor)
 
-    def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
+    def person(self, spec, profile: Profile, seed: int, clock=None) -> HumanAgent:
         if self._navigator is None:
             self._navigator = navigator(self.scenario.map)
         opponents = tuple(p.id for p in self.pursuers) if spec.team == "evader" else (self.evader.id,)
-        situation = behaviours.Situation(spec.id, spec.team, opponents, None, None, self._navigator)
-        return _person(self.scenario, spec, profile, seed, situation, {}, "capture")
+        situation = Situation(spec.id, spec.team, opponents, None, None, self._navigator)
+        return _person(self.scenario, spec, profile, seed, situation, {}, "capture", clock=clock)
 
 
 class _ReachAvoidGame:
@@ -490,12 +495,12 @@ class _ReachAvoidGame:
         )
         return _service(s, advisor)
 
-    def person(self, spec, profile: Profile, seed: int) -> HumanAgent:
+    def person(self, spec, profile: Profile, seed: int, clock=None) -> HumanAgent:
         if self._navigator is None:
             self._navigator = navigator(self.scenario.map)
         opponents = tuple(d.id for d in self.defenders) if spec.team == "attacker" else (self.attacker.id,)
-        situation = behaviours.Situation(spec.id, spec.team, opponents, self.goals["capture"], None, self._navigator)
-        return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture")
+        situation = Situation(spec.id, spec.team, opponents, self.goals["capture"], None, self._navigator)
+        return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture", clock=clock)
 
 
 def _service(scenario: Scenario, advisor, sight=None, tracking=None) -> GuidanceService:
@@ -546,7 +551,10 @@ def _rules_of(scenario: Scenario, kind: type[_Rules]) -> _Rules:
     return rules
 
 
-def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None) -> HumanAgent:
+def _person(
+    scenario, spec, profile: Profile, seed: int, situation, goals, phase, keep_out=None, clock=None
+) -> HumanAgent:
+    """The person ``spec`` plays, its behaviour held to its budget on ``clock`` (None: no budget)."""
     walker = Walker(
         scenario.map,
         spec.start,
@@ -564,5 +572,28 @@ def _person(scenario, spec, profile: Profile, seed: int, situation, goals, phase
         rng=stream(seed, spec.id, "phone"),
         fix_rate=spec.fix_rate,
     )
-    behaviour = behaviours.make(spec.behaviour, spec.options, stream(seed, spec.id, "behaviour"))
-    return HumanAgent(scenario.name, walker, phone, behaviour, situation, goals=goals, phase=phase)
+    chosen = scenario.behaviour_of(spec.id)
+    budget = HumanAgent.period / 4 if spec.budget is None else spec.budget
+    guard = Guard(spec.id, chosen.entry.name, budget, clock)
+    rng = stream(seed, spec.id, "behaviour")
+    behaviour = guard.call(0.0, chosen.entry.factory, chosen.options, rng, check=_made(chosen.entry))
+    return HumanAgent(
+        scenario.name,
+        walker,
+        phone,
+        behaviour,
+        situation,
+        goals=goals,
+        phase=phase,
+        traits=chosen.entry.traits,
+        guard=guard,
+    )
+
+
+def _made(entry: Entry):
+    """The check of what ``entry``'s factory made: an object that decides."""
+
+    def check(made) -> str | None:
+        return None if callable(getattr(made, "decide", None)) else f"made {type(made).__name__}, which has no decide"
+
+    return check

@@ -63,8 +63,6 @@ Event = Annotated[str, Meta(min_length=1, max_length=80)]
 
 EVENTS = ("start", "flag-taken")
 """Events a fault may count from, besides ``AGENT.goes``."""
-GOERS = ("fake-out", "go-no-go")
-"""Behaviours whose attacker commits to a run, so that ``AGENT.goes`` happens."""
 
 
 class _Fault(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=True, tag_field="kind"):
@@ -232,7 +230,7 @@ def load_faults(path: str | Path, scenario) -> tuple[Fault, ...]:
         raise FaultError(f"{path} cannot be read: {exc}") from None
     try:
         plan = convert(data, PlanFile).fault
-        check_faults(plan, scenario.agents, scenario.uavs)
+        check_faults(plan, scenario.agents, scenario.uavs, scenario.committing)
     except Invalid as exc:
         raise FaultError(f"{path}: {exc}") from None
     return plan
@@ -246,9 +244,10 @@ def write_faults(path: str | Path, faults) -> None:
     Path(path).write_text(tomli_w.dumps({"fault": tables}), encoding="utf-8")
 
 
-def check_faults(faults, agents, uavs) -> None:
+def check_faults(faults, agents, uavs, committing) -> None:
     """What needs the scenario's ``agents`` and ``uavs``: the peers and events
-    a plan names (``Invalid`` for the first wrong one)."""
+    a plan names (``Invalid`` for the first wrong one). ``committing`` are
+    the agents whose behaviour commits to a run, so that ``AGENT.goes`` happens."""
     peers = [GROUND, *(a.id for a in agents), *(u.id for u in uavs)]
     behaviours = {a.id: a.behaviour for a in agents}
     for k, fault in enumerate(faults):
@@ -267,10 +266,10 @@ def check_faults(faults, agents, uavs) -> None:
                 raise Invalid(f"fault[{k}].target", f"{fault.target!r} carries no phone; the phones are {phones}'s")
             if fault.mode == "spoof" and fault.position is None:
                 raise Invalid(f"fault[{k}].position", "a spoofed fix needs the [east, north] it reports")
-        _check_event(fault.after, behaviours, f"fault[{k}].after")
+        _check_event(fault.after, behaviours, frozenset(committing), f"fault[{k}].after")
 
 
-def _check_event(event: str, behaviours: dict[str, str], where: str) -> None:
+def _check_event(event: str, behaviours: dict[str, str], committing: frozenset[str], where: str) -> None:
     if event in EVENTS:
         return
     agent, dot, what = event.rpartition(".")
@@ -278,11 +277,11 @@ def _check_event(event: str, behaviours: dict[str, str], where: str) -> None:
         raise Invalid(where, f"{event!r} is not an event; the events are {', '.join(EVENTS)} and AGENT.goes")
     if agent not in behaviours:
         raise Invalid(where, f"there is no agent {agent!r}; the agents are {', '.join(behaviours)}")
-    if behaviours[agent] not in GOERS:
+    if agent not in committing:
         raise Invalid(
             where,
-            f"agent {agent} never goes: its behaviour is {behaviours[agent]}, and only "
-            f"{' and '.join(GOERS)} attackers commit to a run",
+            f"agent {agent} never goes: its behaviour {behaviours[agent]} does not commit to a run "
+            "(it declares no 'commits' trait)",
         )
 
 

@@ -51,15 +51,19 @@ the file and the key path, list indices counted from 0, such as
 from __future__ import annotations
 
 import tomllib
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any, Literal, get_args
 
 import msgspec
+import tomli_w
 from msgspec import Meta
 from shapely.geometry import Polygon
 
+from bearcat.agents.human.behaviour import BEHAVIOURS, COMMITS
+from bearcat.agents.options import Angle, Options, Period, Point
+from bearcat.agents.registry import Entry, PluginError
 from bearcat.agents.uav.agent import Failsafe, Steering
 from bearcat.bus.messages import Name
 from bearcat.bus.validation import Invalid, convert, not_one_of
@@ -111,18 +115,9 @@ by a quantile over its belief)."""
 Transport = Literal["tcp", "udp"]
 TRANSPORTS: tuple[Transport, ...] = get_args(Transport)
 """How best-effort messages (fixes, guidance) travel in live runs; reliable ones always go over tcp."""
-Coordinate = Annotated[float, Meta(ge=-1e7, le=1e7, extra={"unit": "m"})]
-Point = Annotated[tuple[Coordinate, Coordinate], Meta(description="[east, north] in metres")]
-Route = Annotated[tuple[Point, ...], Meta(min_length=1, description="a list of [east, north] points in metres")]
 Ring = Annotated[tuple[Point, ...], Meta(min_length=3, description="a polygon of at least 3 [east, north] points")]
 Rate = Annotated[float, Meta(ge=0.01, le=50.0, extra={"unit": "Hz"})]
-Distance = Annotated[float, Meta(ge=0.0, le=1000.0, extra={"unit": "m"})]
 Radius = Annotated[float, Meta(gt=0.0, le=1000.0, extra={"unit": "m"})]
-Share = Annotated[float, Meta(ge=0.0, le=1.0)]
-Angle = Annotated[float, Meta(ge=0.0, le=180.0, extra={"unit": "degrees"})]
-Lag = Annotated[float, Meta(ge=0.0, le=60.0, extra={"unit": "s"})]
-Period = Annotated[float, Meta(gt=0.0, le=3600.0, extra={"unit": "s"})]
-Memory = Annotated[float, Meta(ge=0.0, le=3600.0, extra={"unit": "s"})]
 WalkingSpeed = Annotated[float, Meta(gt=0.0, le=15.0, extra={"unit": "m/s"})]
 """A person's top speed: a sprinter peaks at 12.4 m/s."""
 
@@ -135,110 +130,45 @@ class _Table(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=Tr
     """A TOML table: its keys are exactly the fields."""
 
 
-# ---------------------------------------------------------------- behaviours
-
-
-class _Options(_Table, frozen=True):
-    def places(self) -> tuple[tuple[str, tuple[float, float]], ...]:
-        """(key, point) of every point these options send the agent to, checked against the map."""
-        return ()
-
-
-class NoOptions(_Options, frozen=True):
-    pass
-
-
-class UnaidedOptions(_Options, frozen=True):
-    standoff: Distance = 6.0
-    share: Share = 0.5
-    lead: Lag = 1.5
-
-
-class FakeOutOptions(_Options, frozen=True):
-    turn_every: Annotated[float, Meta(gt=0.0, le=600.0, extra={"unit": "s"})] = 1.5
-    spread: Angle = 100.0
-    margin: Distance = 0.0
-
-
-class GoNoGoOptions(_Options, frozen=True):
-    hold: Point
-    fresh: Period = 2.0
-    margin: Distance = 0.0
-    flee: Distance = 0.0
-
-    def places(self):
-        return (("hold", self.hold),)
-
-
-class WaypointsOptions(_Options, frozen=True):
-    points: Route
-    loop: bool = False
-
-    def places(self):
-        return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
-
-
-class PatrolOptions(UnaidedOptions, kw_only=True, frozen=True):
-    points: Route
-    memory: Memory = 5.0
-    wander: bool = False
-
-    def places(self):
-        return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
-
-
 # ---------------------------------------------------------------- players
 
+PluginName = Annotated[
+    str,
+    Meta(
+        min_length=1,
+        max_length=300,
+        description="a plug-in's name, module:attribute or file.py:attribute",
+    ),
+]
 
-class AgentSpec(_Table, tag_field="behaviour", frozen=True):
-    """A person: one subclass per behaviour, each with its options."""
+
+class AgentSpec(_Table, frozen=True):
+    """A person: where they start, how fast they go, how they decide
+    (``behaviour``, a plug-in of ``BEHAVIOURS``, with its ``options``) and
+    how their phone guides them."""
 
     id: Name
     team: Team
     start: Point
     speed: WalkingSpeed
+    behaviour: PluginName
+    options: dict[str, Any] = {}  # read into the behaviour's options type (Scenario.behaviour_of)
     aided: bool = True
     uncertainty: Uncertainty | None = None  # this agent's guidance; None: the scenario's guidance.uncertainty
     fix_rate: Rate = 1.0
     reaction: Annotated[float, Meta(ge=0.0, le=10.0, extra={"unit": "s"})] = 0.4  # from a display change to a turn
     heading_error: Angle = 10.0  # standard deviation of following a displayed heading
-
-    @property
-    def behaviour(self) -> str:
-        tag = self.__struct_config__.tag
-        assert isinstance(tag, str)  # every kind of agent is tagged with its behaviour's name
-        return tag
+    # How long, in live runs, the behaviour may take to decide before its
+    # answer is dropped; None: a quarter of the walker's tick.
+    budget: Annotated[float, Meta(gt=0.0, le=10.0, extra={"unit": "s"})] | None = None
 
 
-class FollowGuidanceAgent(AgentSpec, tag="follow-guidance", frozen=True):
-    options: NoOptions = NoOptions()
+@dataclass(frozen=True)
+class Plugged:
+    """A plug-in a scenario chose: its registry ``entry`` and the ``options`` read into its type."""
 
-
-class UnaidedAgent(AgentSpec, tag="direct", frozen=True):
-    options: UnaidedOptions = UnaidedOptions()
-
-
-class FakeOutAgent(AgentSpec, tag="fake-out", frozen=True):
-    options: FakeOutOptions = FakeOutOptions()
-
-
-class GoNoGoAgent(AgentSpec, tag="go-no-go", kw_only=True, frozen=True):
-    options: GoNoGoOptions
-
-
-class WaypointsAgent(AgentSpec, tag="waypoints", kw_only=True, frozen=True):
-    options: WaypointsOptions
-
-
-class PatrolAgent(AgentSpec, tag="patrol", kw_only=True, frozen=True):
-    options: PatrolOptions
-
-
-class KeyboardAgent(AgentSpec, tag="keyboard", frozen=True):
-    options: NoOptions = NoOptions()
-
-
-Agent = FollowGuidanceAgent | UnaidedAgent | FakeOutAgent | GoNoGoAgent | WaypointsAgent | PatrolAgent | KeyboardAgent
+    entry: Entry
+    options: msgspec.Struct
 
 
 class UavSpec(_Table, frozen=True):
@@ -341,7 +271,7 @@ class GuidanceTable(_Table, frozen=True):
 
 class ScenarioFile(_Table, frozen=True):
     scenario: ScenarioTable
-    agent: Annotated[tuple[Agent, ...], Meta(min_length=1, description="at least one [[agent]] table")]
+    agent: Annotated[tuple[AgentSpec, ...], Meta(min_length=1, description="at least one [[agent]] table")]
     rules: dict[str, Any] = {}
     guidance: GuidanceTable = GuidanceTable()
     uav: tuple[UavSpec, ...] = ()
@@ -372,6 +302,17 @@ class Scenario:
     alpha: float = 0.01  # calibrated: the false-go share the margin allows
     defender_quantile: float = 0.5  # calibrated: the share of the belief the defender may lose against
     ablate: tuple[str, ...] = ()  # calibrated: parts switched off (ABLATIONS)
+    behaviours: dict[str, Plugged] = field(default_factory=dict)  # agent -> its behaviour, options read
+    directory: Path | None = None  # the folder of the scenario's file, which file.py:attribute plug-ins are in
+
+    def behaviour_of(self, agent: str) -> Plugged:
+        """How ``agent`` decides: its behaviour's entry, with the options the scenario gives it."""
+        return self.behaviours[agent]
+
+    @property
+    def committing(self) -> frozenset[str]:
+        """The agents whose behaviour commits to a run at some moment (``AGENT.goes``)."""
+        return frozenset(a for a, chosen in self.behaviours.items() if chosen.entry.has(COMMITS))
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
@@ -418,12 +359,16 @@ def load_scenario(name_or_path: str | Path) -> Scenario:
         raise ScenarioError(f"{path} is not UTF-8 text (byte {exc.start} is {exc.object[exc.start]:#04x})") from None
     except OSError as exc:
         raise ScenarioError(f"{path} cannot be read: {exc.strerror}") from None
-    return parse_scenario(text, source=str(path))
+    return parse_scenario(text, source=str(path), directory=path.resolve().parent)
 
 
-def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | None = None) -> Scenario:
+def parse_scenario(
+    text: str, source: str = "<scenario>", *, game_map: Map | None = None, directory: Path | None = None
+) -> Scenario:
     """The scenario in ``text``; ``game_map``, if given, stands for the map it
-    names (a peer that fetched both from the ground station)."""
+    names (a peer that fetched both from the ground station); ``directory``
+    is the folder a ``file.py:attribute`` plug-in it names is relative to
+    (None: the working directory)."""
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
@@ -440,7 +385,9 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
                 game_map = load_map(head.map)
             except MapError as exc:
                 raise Invalid("scenario.map", str(exc)) from None
-        _check_against(file, rules, game_map)
+        behaviours = _behaviours(file.agent, directory)
+        _check_against(file, rules, game_map, behaviours)
+        text = _located(text, data, directory)
     except (Invalid, MapError) as exc:
         raise ScenarioError(f"{source}: {exc}") from None
     return Scenario(
@@ -466,7 +413,40 @@ def parse_scenario(text: str, source: str = "<scenario>", *, game_map: Map | Non
         uavs=file.uav,
         lease=head.lease,
         faults=file.fault,
+        behaviours=behaviours,
+        directory=directory,
     )
+
+
+def _located(text: str, data: dict, directory: Path | None) -> str:
+    """``text``, or where it names a plug-in by a file relative to its
+    folder, the same scenario naming that file by its absolute path: the
+    text a run keeps and serves, which its peers and checker read from
+    other folders."""
+    relative = [
+        agent
+        for agent in data["agent"]
+        if agent["behaviour"].rpartition(":")[0].endswith(".py")
+        and not Path(agent["behaviour"].rpartition(":")[0]).is_absolute()
+    ]
+    if not relative:
+        return text
+    for agent in relative:
+        where, _, attribute = agent["behaviour"].rpartition(":")
+        agent["behaviour"] = f"{((directory or Path.cwd()) / where).resolve()}:{attribute}"
+    return tomli_w.dumps(data)
+
+
+def _behaviours(agents: tuple[AgentSpec, ...], directory: Path | None) -> dict[str, Plugged]:
+    """Each agent's behaviour from its registry, with its options read into the behaviour's type."""
+    chosen = {}
+    for k, agent in enumerate(agents):
+        try:
+            entry = BEHAVIOURS.get(agent.behaviour, directory)
+        except PluginError as exc:
+            raise Invalid(f"agent[{k}].behaviour", str(exc)) from None
+        chosen[agent.id] = Plugged(entry, convert(agent.options, entry.options_type, at=f"agent[{k}].options"))
+    return chosen
 
 
 def _check_uncertainty(file: ScenarioFile) -> None:
@@ -492,17 +472,19 @@ def _check_renamed(data: dict) -> None:
             raise Invalid(f"agent[{k}].robust", replaced.format(f"agent[{k}]."))
 
 
-def _check_against(file: ScenarioFile, rules, game_map: Map) -> None:
+def _check_against(file: ScenarioFile, rules, game_map: Map, behaviours: dict[str, Plugged]) -> None:
     """What needs the game and the map: teams, places, regions, grid sizes, who plays."""
     game = file.scenario.game
     teams = TEAMS[game]
-    for kind, specs in (("agent", file.agent), ("uav", file.uav)):
-        for k, spec in enumerate(specs):
-            if spec.team not in teams:
-                raise Invalid(f"{kind}[{k}].team", f"{not_one_of(spec.team, teams)} (the teams of a {game} game)")
+    sides: list[tuple[str, str]] = [(f"agent[{k}]", a.team) for k, a in enumerate(file.agent)]
+    sides += [(f"uav[{k}]", u.team) for k, u in enumerate(file.uav)]
+    for where, team in sides:
+        if team not in teams:
+            raise Invalid(f"{where}.team", f"{not_one_of(team, teams)} (the teams of a {game} game)")
     for k, agent in enumerate(file.agent):
         game_map.check_position(agent.start, f"agent[{k}].start")
-        for key, point in agent.options.places():
+        options = behaviours[agent.id].options
+        for key, point in options.places() if isinstance(options, Options) else ():
             game_map.check_position(point, f"agent[{k}].options.{key}")
     xmin, ymin, xmax, ymax = game_map.bounds
     for k, uav in enumerate(file.uav):
@@ -526,7 +508,8 @@ def _check_against(file: ScenarioFile, rules, game_map: Map) -> None:
             f"{spacing:g} m makes {side / spacing:.0f} cells across map {game_map.name} ({side:g} m); "
             f"2 to {MAX_CELLS} are allowed",
         )
-    check_faults(file.fault, file.agent, file.uav)
+    committing = [a for a, chosen in behaviours.items() if chosen.entry.has(COMMITS)]
+    check_faults(file.fault, file.agent, file.uav, committing)
     _check_uncertainty(file)
     ids = [a.id for a in file.agent] + [u.id for u in file.uav]
     twice = sorted({i for i in ids if ids.count(i) > 1})

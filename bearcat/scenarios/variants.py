@@ -35,7 +35,12 @@ def vary(scenario: Scenario, changes: dict) -> Scenario:
     for path, value in changes.items():
         _set(data, path, value, scenario.source)
     described = ", ".join(f"{path} = {value!r}" for path, value in changes.items())
-    return parse_scenario(tomli_w.dumps(data), source=f"{scenario.source} with {described}", game_map=scenario.map)
+    return parse_scenario(
+        tomli_w.dumps(data),
+        source=f"{scenario.source} with {described}",
+        game_map=scenario.map,
+        directory=scenario.directory,
+    )
 
 
 def _set(data: dict, path: str, value, source: str) -> None:

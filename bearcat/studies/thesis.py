@@ -244,7 +244,7 @@ def play_task(task: dict) -> dict:
 
 def game_row(task: dict, scenario, outcome, events) -> dict:
     """The result row of one game, simulated or live, from its outcome and event log."""
-    went = outcome.notes.get("attacker.went_at", outcome.notes.get("attacker.committed_at"))
+    went = outcome.notes.get("attacker.committed_at")
     true_value = None if went is None else _true_value(scenario, events, went)
     found = [v for k, v in outcome.notes.items() if k.endswith(".found_at")]
     return {

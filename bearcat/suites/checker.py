@@ -18,6 +18,10 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   a player cut off gets guidance again within ``REJOIN`` s of the heal;
 - ``failsafe``: a UAV whose ground station vanished applied its failsafe
   within its ``link_timeout`` after it vanished;
+- ``plugins``: every fault of a plug-in (``agents.guard``: it raised,
+  answered what its protocol does not allow, or overran its budget) left
+  its agent going: the agent reported on after it, or the game ended
+  within ``IN_FLIGHT`` s of it, and the game ended with a verdict;
 - ``leftovers``: no process the run started still runs, and a kernel run
   left neither its link nor its route in the host's namespace. The run
   names its own (``runtime.processes``, ``endpoint.json``): a process is
@@ -34,6 +38,7 @@ import itertools
 import json
 import math
 import subprocess
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -54,7 +59,7 @@ RELIABLE_KINDS = ("state", "control", "task")
 IN_FLIGHT = 2.0  # s before its receiver's last record a message must have arrived by
 WINDOW = 1.0  # s of truth before the verdict in which a capture must show
 ENDINGS = ("peer ", "vehicle ")
-INVARIANTS = ("logs", "reliable", "verdict", "detection", "failsafe", "leftovers")
+INVARIANTS = ("logs", "reliable", "verdict", "detection", "failsafe", "plugins", "leftovers")
 DETECTABLE = ("kill", "stop", "restart", "pause", "partition", "outage")
 
 
@@ -76,6 +81,7 @@ def check_run(directory: str | Path | Run) -> list[Finding]:
         _verdict(run),
         _detection(run),
         _failsafe(run),
+        _plugins(run),
         _leftovers(run),
     ]
 
@@ -134,7 +140,7 @@ class Run:
             return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "guidance")
         if what == "sent":
             return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "truth")
-        return what in ("did", "fault", "fault-end", "gone", "alive")
+        return what in ("did", "plugin", "fault", "fault-end", "gone", "alive")
 
     def _outcome(self) -> dict | None:
         try:
@@ -328,6 +334,33 @@ def _failsafe(run: Run) -> Finding:
     if not findings:
         return Finding("failsafe", None, "no UAV lost its ground station")
     return Finding("failsafe", True, "; ".join(findings))
+
+
+def _plugins(run: Run) -> Finding:
+    faults = [e for e in run.records() if e["event"] == "plugin"]
+    if not faults:
+        return Finding("plugins", True, "no plug-in failed")
+    told = Counter((e["agent"], e["plugin"], e["fault"]) for e in faults)
+    said = "; ".join(
+        f"{agent}'s {plugin} {fault} {n} time{'s' * (n > 1)}" for (agent, plugin, fault), n in told.items()
+    )
+    first = f"{faults[0]['agent']}: plug-in {faults[0]['plugin']} {faults[0]['detail']}"
+    end = _game_end(run)
+    if end is None:
+        return Finding("plugins", False, f"{said}, and the game ended without a verdict (first: {first})")
+    last_fault: dict[str, float] = {}
+    for e in faults:
+        last_fault[e["agent"]] = max(last_fault.get(e["agent"], e["at"]), e["at"])
+    reported: dict[str, float] = {}
+    for e in run.events:
+        if e["event"] == "sent" and _kind(e["key"]) == "truth":
+            reported[e["message"]["agent"]] = e["t"]
+    for agent, at in last_fault.items():
+        if reported.get(agent, -math.inf) < at and end - at > IN_FLIGHT:
+            return Finding(
+                "plugins", False, f"{agent} reported nothing after its plug-in's fault at {at:.1f} s: {said}"
+            )
+    return Finding("plugins", True, f"{said}; each agent went on, and the game to its verdict (first: {first})")
 
 
 def _leftovers(run: Run) -> Finding:

@@ -62,7 +62,7 @@ def _prepare(scenario, faults, changes):
         plan = load_faults(faults, scenario)
     else:
         plan = parse_faults(list(faults))
-        check_faults(plan, scenario.agents, scenario.uavs)
+        check_faults(plan, scenario.agents, scenario.uavs, scenario.committing)
     return scenario, plan
 
 

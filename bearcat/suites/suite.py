@@ -127,7 +127,7 @@ def load_suite(path: str | Path) -> tuple[str, list[Case]]:
             faults = table.fault
             if table.faults is not None:
                 faults = (*faults, *load_faults(path.parent / table.faults, scenario))
-            check_faults(faults, scenario.agents, scenario.uavs)
+            check_faults(faults, scenario.agents, scenario.uavs, scenario.committing)
         except (ScenarioError, FaultError) as exc:
             raise FaultError(f"{where}: {exc}") from None
         except Invalid as exc:

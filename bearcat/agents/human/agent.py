@@ -6,15 +6,23 @@ and the behaviour reads the screen and sets where the body heads next (the
 body turns after its reaction delay). Nobody moves before the start
 command. Guidance updates the screen; game state tells the phase (who holds
 the flag) and when the game is over.
+
+The behaviour is a plug-in, called through a ``Guard``: when it fails, the
+person stands still for that tick. What it declares it does (its traits)
+is read from its registry entry: a committing behaviour's go is recorded
+as the event ``goes`` and goes out with the truth, a telling one's events
+are recorded as they appear.
 """
 
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Any, cast
 
 import numpy as np
 
-from bearcat.agents.human.behaviours import Situation
+from bearcat.agents.guard import Guard, PluginFault
+from bearcat.agents.human.behaviour import COMMITS, TELLS, Behaviour, Commits, Situation, Tells, direction_problem
 from bearcat.agents.human.phone import Phone
 from bearcat.agents.human.walker import Walker
 from bearcat.agents.protocol import Send
@@ -36,17 +44,21 @@ class HumanAgent:
         game: str,
         walker: Walker,
         phone: Phone,
-        behaviour,
+        behaviour: Behaviour | None,
         situation: Situation,
         *,
         goals: dict[str, object],
         phase: str = "capture",
+        traits: frozenset[str] = frozenset(),
+        guard: Guard | None = None,
     ) -> None:
         self.game = game
         self.name = situation.agent
         self.walker = walker
         self.phone = phone
-        self.behaviour = behaviour
+        self.behaviour = behaviour  # None: its factory failed, and the person stands
+        self.traits = traits
+        self.guard = guard or Guard(situation.agent, type(behaviour).__name__)
         self.situation = situation
         self.goals = goals
         self.phase = phase
@@ -54,6 +66,11 @@ class HumanAgent:
         self.ended = False
         self.subscriptions = (keys.guidance(game, self.name), keys.state(game), keys.control(game))
         self._last: float | None = None
+        # What the runtime records as events: (t, what) and the guard's PluginFaults.
+        self.events: list[tuple[float, str] | PluginFault] = list(self.guard.faults)
+        self._told_faults = len(self.guard.faults)
+        self._told_events = 0
+        self._went = False
 
     def start(self, now: float) -> list[Send]:
         self._last = now
@@ -84,17 +101,42 @@ class HumanAgent:
         if dt > 0:
             self.walker.step(now - dt, dt)
         if self.started and not self.ended:
-            direction = self.behaviour.decide(now, self.walker.position.copy(), self.phone.screen, self.situation)
-            self.walker.intend(now, direction)
+            self.walker.intend(now, self._decide(now))
         return self._report(now)
+
+    def _decide(self, now: float) -> Any:
+        """The behaviour's direction, None (stand) if it has none or failed; what it did goes to ``events``."""
+        direction = None
+        if self.behaviour is not None:
+            me, screen = self.walker.position.copy(), self.phone.screen
+            direction = self.guard.call(
+                now, self.behaviour.decide, now, me, screen, self.situation, check=direction_problem
+            )
+            if TELLS in self.traits:
+                told = cast(Tells, self.behaviour).events
+                self.events += [(now, str(what)) for what in told[self._told_events :]]
+                self._told_events = len(told)
+            if not self._went and self.going:
+                self._went = True
+                self.events.append((now, "goes"))
+        self.events += self.guard.faults[self._told_faults :]
+        self._told_faults = len(self.guard.faults)
+        return direction
 
     def peer(self, key: str, alive: bool, now: float) -> list[Send]:
         return []
 
     @property
+    def committed_at(self) -> float | None:
+        """When a committing behaviour committed to its run (a fake-out's go, a go-no-go's go); None before."""
+        if self.behaviour is None or COMMITS not in self.traits:
+            return None
+        return cast(Commits, self.behaviour).committed_at
+
+    @property
     def going(self) -> bool:
-        """Whether the behaviour has committed to its run (a fake-out's go, a go-no-go's go)."""
-        return any(getattr(self.behaviour, mark, None) is not None for mark in ("went_at", "committed_at"))
+        """Whether the behaviour has committed to its run."""
+        return self.committed_at is not None
 
     def resume(self, truth: Truth) -> None:
         """Stand where ``truth``, the last this walker reported before its peer

@@ -1,10 +1,7 @@
-"""How a simulated person decides where to go, from what their phone shows.
+"""The built-in behaviours: how the thesis's people decided where to go.
 
-Every behaviour reads the same inputs a person in the field had: their own
-position (people know where they stand), the phase of the game, and the
-phone's ``Screen`` (opponents as last reported, with the reports' ages; the
-opponent's winning region; the heading ring; go / no-go). It returns a
-direction (east, north) or None to stand still.
+Each is an entry of ``behaviour.BEHAVIOURS`` exactly as a user's own is
+(see ``behaviour.Behaviour``), with its options type:
 
 - ``follow-guidance``: walk the displayed heading.
 - ``direct`` (unaided): an attacker goes for its goal along the shortest
@@ -22,51 +19,75 @@ direction (east, north) or None to stand still.
   between its points at random, while no opponent is in sight; play
   ``direct`` against one seen in the last ``memory`` seconds.
 - ``keyboard``: arrow keys or WASD set the direction; the runtime feeds keys.
-
-The options and their defaults are the scenario schema's (scenarios/schema.py);
-``make`` passes them all, so the constructors declare none.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import Annotated, ClassVar
 
-import msgspec
 import numpy as np
 import shapely
 import shapely.ops
+from msgspec import Meta
 
+from bearcat.agents.human.behaviour import COMMITS, TAKES_KEYS, Behaviour, Situation
 from bearcat.agents.human.phone import Screen
-from bearcat.agents.navigation import Navigator
+from bearcat.agents.options import Angle, Distance, Lag, Memory, NoOptions, Options, Period, Point, Route, Share
 
 ARRIVED = 1.0  # metres: close enough to a waypoint or hold point
 
 
-@dataclass(frozen=True)
-class Situation:
-    """What a behaviour may know besides its screen: who it is, its team and
-    opponents, and the regions the rules name (shapely, map metres)."""
-
-    agent: str
-    team: str
-    opponents: tuple[str, ...]
-    goal: object  # where this agent is heading in the current phase (attackers)
-    forbidden: object  # where this agent may not go (defenders: flag and return regions)
-    navigator: Navigator
+class UnaidedOptions(Options, frozen=True):
+    standoff: Distance = 6.0
+    share: Share = 0.5
+    lead: Lag = 1.5
 
 
-class FollowGuidance:
+class FakeOutOptions(Options, frozen=True):
+    turn_every: Annotated[float, Meta(gt=0.0, le=600.0, extra={"unit": "s"})] = 1.5
+    spread: Angle = 100.0
+    margin: Distance = 0.0
+
+
+class GoNoGoOptions(Options, frozen=True):
+    hold: Point
+    fresh: Period = 2.0
+    margin: Distance = 0.0
+    flee: Distance = 0.0
+
+    def places(self):
+        return (("hold", self.hold),)
+
+
+class WaypointsOptions(Options, frozen=True):
+    points: Route
+    loop: bool = False
+
+    def places(self):
+        return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
+
+
+class PatrolOptions(UnaidedOptions, kw_only=True, frozen=True):
+    points: Route
+    memory: Memory = 5.0
+    wander: bool = False
+
+    def places(self):
+        return tuple((f"points[{j}]", p) for j, p in enumerate(self.points))
+
+
+class FollowGuidance(Behaviour):
     """Walk the displayed heading, but not into a region one may not enter."""
-
-    name = "follow-guidance"
 
     def decide(self, now: float, me: np.ndarray, screen: Screen, situation: Situation):
         return _around(me, screen.heading, situation.forbidden)
 
 
-class Unaided:
-    """Unaided play, the scenario's ``direct``. An attacker goes for its goal
+class Unaided(Behaviour):
+    """Unaided play: run for the goal, block the attacker's run, flee or chase.
+
+    An attacker goes for its goal
     along the shortest path; an evader runs from the pursuers it sees,
     nearest first; a pursuer runs straight at the evader.
     A defender marks the attacker as displayed, anticipating it: it takes
@@ -78,12 +99,12 @@ class Unaided:
     mark lags the display's age and the person's reaction, and a reversal
     leaves it committed to the wrong side."""
 
-    name = "direct"
+    Options = UnaidedOptions
 
-    def __init__(self, standoff: float, share: float, lead: float) -> None:
-        self.standoff = standoff
-        self.share = share
-        self.lead = lead
+    def __init__(self, options: UnaidedOptions, rng: np.random.Generator) -> None:
+        self.standoff = options.standoff
+        self.share = options.share
+        self.lead = options.lead
         self._seen: dict[str, tuple[float, np.ndarray]] = {}
         self._course: dict[str, np.ndarray] = {}
 
@@ -117,30 +138,33 @@ class Unaided:
         return self._course.get(key, np.zeros(2))
 
 
-class FakeOut:
-    """The attacker's fake-out. While the display shows the defender in its
+class FakeOut(Behaviour):
+    """The attacker's fake-out (thesis 3.5.1): feint, then go home for good.
+
+    While the display shows the defender in its
     winning region, the attacker feints: it runs across the field, to one
     side then the other, each leg ``turn_every`` seconds give or take half,
     at ``spread`` degrees from the line to its goal give or take 30 (more
     than 90: drifting back, less: pressing forward). Once the display shows
     the defender outside its region, by at least ``margin`` metres of the
-    solver's value, it follows the heading home for good (``went_at``
+    solver's value, it follows the heading home for good (``committed_at``
     records when)."""
 
-    name = "fake-out"
+    Options = FakeOutOptions
+    traits = frozenset({COMMITS})
 
-    def __init__(self, rng: np.random.Generator, turn_every: float, spread: float, margin: float) -> None:
+    def __init__(self, options: FakeOutOptions, rng: np.random.Generator) -> None:
         self.rng = rng
-        self.margin = margin
-        self.turn_every = turn_every
-        self.spread = math.radians(spread)
+        self.margin = options.margin
+        self.turn_every = options.turn_every
+        self.spread = math.radians(options.spread)
         self._next_turn = -math.inf
         self._side = 1.0 if rng.random() < 0.5 else -1.0
         self._offset = 0.0
-        self.went_at: float | None = None
+        self.committed_at: float | None = None
 
     def decide(self, now, me, screen, situation):
-        if self.went_at is None:
+        if self.committed_at is None:
             defender = _nearest_opponent(me, screen, situation)
             clear = screen.value is not None and screen.value <= -self.margin
             if (
@@ -149,8 +173,8 @@ class FakeOut:
                 and not screen.in_region(defender.position)
                 and clear
             ):
-                self.went_at = now
-        if self.went_at is not None:
+                self.committed_at = now
+        if self.committed_at is not None:
             return screen.heading
         if now >= self._next_turn:
             self._side = -self._side
@@ -161,21 +185,24 @@ class FakeOut:
         return np.array([math.sin(bearing), math.cos(bearing)])
 
 
-class GoNoGo:
-    """Hold at ``hold`` until the display says go, by at least ``margin``
+class GoNoGo(Behaviour):
+    """Hold near cover until the display says go on fresh reports (thesis 3.5.2), then commit.
+
+    Hold at ``hold`` until the display says go, by at least ``margin``
     metres of the solver's value, with every opponent's report younger than
     ``fresh`` seconds (or a go that holds wherever an unseen opponent may
     be); then commit for good. ``committed_at`` records when.
     Until then, an opponent shown within ``flee`` metres with a fresh report
     is run from (0: stand one's ground)."""
 
-    name = "go-no-go"
+    Options = GoNoGoOptions
+    traits = frozenset({COMMITS})
 
-    def __init__(self, hold, fresh: float, margin: float, flee: float) -> None:
-        self.hold = np.asarray(hold, float)
-        self.fresh = float(fresh)
-        self.margin = float(margin)
-        self.flee = float(flee)
+    def __init__(self, options: GoNoGoOptions, rng: np.random.Generator) -> None:
+        self.hold = np.asarray(options.hold, float)
+        self.fresh = float(options.fresh)
+        self.margin = float(options.margin)
+        self.flee = float(options.flee)
         self.committed_at: float | None = None
 
     def decide(self, now, me, screen, situation):
@@ -198,12 +225,14 @@ class GoNoGo:
         return situation.navigator.toward(tuple(self.hold), me)
 
 
-class Waypoints:
-    name = "waypoints"
+class Waypoints(Behaviour):
+    """Visit ``points`` in turn, and with ``loop`` start again."""
 
-    def __init__(self, points, loop: bool) -> None:
-        self.points = [np.asarray(p, float) for p in points]
-        self.loop = loop
+    Options = WaypointsOptions
+
+    def __init__(self, options: WaypointsOptions, rng: np.random.Generator) -> None:
+        self.points = [np.asarray(p, float) for p in options.points]
+        self.loop = options.loop
         self.index = 0
 
     def decide(self, now, me, screen, situation):
@@ -218,20 +247,22 @@ class Waypoints:
         return situation.navigator.toward(tuple(self.points[self.index]), me)
 
 
-class Patrol:
-    """Walk the ``points`` in turn (or, with ``wander``, each next one drawn
+class Patrol(Behaviour):
+    """Walk a route until an opponent is seen, then play ``direct``.
+
+    Walk the ``points`` in turn (or, with ``wander``, each next one drawn
     at random among the others, so the route cannot be learnt) until an
     opponent is on the screen; then play unaided (``direct``)."""
 
-    name = "patrol"
+    Options = PatrolOptions
 
-    def __init__(self, points, rng: np.random.Generator, memory: float, wander: bool, **unaided) -> None:
-        self.points = [np.asarray(p, float) for p in points]
+    def __init__(self, options: PatrolOptions, rng: np.random.Generator) -> None:
+        self.points = [np.asarray(p, float) for p in options.points]
         self.rng = rng
-        self.wander = wander
-        self.unaided = Unaided(**unaided)
-        self.memory = float(memory)
-        self.index = int(rng.integers(len(self.points))) if wander else 0
+        self.wander = options.wander
+        self.unaided = Unaided(options, rng)
+        self.memory = float(options.memory)
+        self.index = int(rng.integers(len(self.points))) if self.wander else 0
 
     def decide(self, now, me, screen, situation):
         if any(screen.age(o, now) <= self.memory for o in situation.opponents):
@@ -247,7 +278,7 @@ class Patrol:
         return int(self.rng.choice(others))
 
 
-KEYS = {
+KEY_DIRECTIONS = {
     "up": (0.0, 1.0),
     "w": (0.0, 1.0),
     "down": (0.0, -1.0),
@@ -261,43 +292,35 @@ KEYS = {
 }
 
 
-class Keyboard:
-    """Direction from keys: a key sets it until another key (space or x stops)."""
+class Keyboard(Behaviour):
+    """Walk where the keys say: arrows or WASD set the direction until another key; space or x stops."""
 
-    name = "keyboard"
+    traits: ClassVar[frozenset[str]] = frozenset({TAKES_KEYS})
 
-    def __init__(self) -> None:
+    def __init__(self, options: NoOptions, rng: np.random.Generator) -> None:
         self.direction: np.ndarray | None = None
 
     def press(self, key: str) -> bool:
         """Take a key name (``up``, ``w``, ``space``, ...); False for keys it ignores."""
-        if key not in KEYS:
+        if key not in KEY_DIRECTIONS:
             return False
-        self.direction = None if KEYS[key] is None else np.array(KEYS[key])
+        self.direction = None if KEY_DIRECTIONS[key] is None else np.array(KEY_DIRECTIONS[key])
         return True
 
     def decide(self, now, me, screen, situation):
         return self.direction
 
 
-def make(name: str, options: msgspec.Struct, rng: np.random.Generator):
-    """The behaviour ``name`` with the scenario's ``options`` (a Struct of the schema)."""
-    given = msgspec.structs.asdict(options)
-    if name == "follow-guidance":
-        return FollowGuidance()
-    if name == "direct":
-        return Unaided(**given)
-    if name == "fake-out":
-        return FakeOut(rng, **given)
-    if name == "go-no-go":
-        return GoNoGo(**given)
-    if name == "waypoints":
-        return Waypoints(**given)
-    if name == "patrol":
-        return Patrol(rng=rng, **given)
-    if name == "keyboard":
-        return Keyboard()
-    raise ValueError(f"there is no behaviour {name!r}")
+BUILTINS: dict[str, type] = {
+    "follow-guidance": FollowGuidance,
+    "direct": Unaided,
+    "fake-out": FakeOut,
+    "go-no-go": GoNoGo,
+    "waypoints": Waypoints,
+    "patrol": Patrol,
+    "keyboard": Keyboard,
+}
+"""The built-in entries of ``behaviour.BEHAVIOURS``, by the names scenarios give them."""
 
 
 # ---------------------------------------------------------------------- geometry

@@ -1,0 +1,94 @@
+"""``bearcat plugins``: what plug-ins there are, and whether a scenario's load.
+
+``list`` shows every registered entry of every kind (the built-ins, then
+what installed distributions register under the entry-point groups) with
+where it comes from and its summary; an entry point that fails to load is
+listed with the sentence saying why, and the exit code is 1.
+
+``check SCENARIO`` reads the scenario, which imports every plug-in it names
+and reads each one's options into its type, then makes each plug-in once as
+a game would, without playing: exit 0 when all of them load, 2 with one
+sentence naming the culprit when the scenario cannot be read, 1 when a
+plug-in's factory fails.
+"""
+
+from __future__ import annotations
+
+import msgspec
+
+from bearcat.cli.arguments import Commands
+from bearcat.cli.output import Output
+
+
+def register(commands: Commands) -> None:
+    p = commands.add_parser(
+        "plugins",
+        description="List the behaviours, built-in and installed, that scenarios may name, or check what one names.",
+    )
+    verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
+    listing = verbs.add_parser("list", help="every registered plug-in, with where it comes from")
+    listing.add_argument("--json", action="store_true", help="print the entries as JSON only")
+    listing.set_defaults(run=run_list)
+    check = verbs.add_parser("check", help="import and check the plug-ins a scenario names, without playing")
+    check.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
+    check.add_argument("--json", action="store_true", help="print what was found as JSON only")
+    check.set_defaults(run=run_check)
+
+
+def run_list(args) -> int:
+    from bearcat.agents.registry import PluginError
+    from bearcat.plugins import REGISTRIES
+
+    out = Output(args.json)
+    rows, broken = [], []
+    for registry in REGISTRIES:
+        for entry in registry.entries():
+            if isinstance(entry, PluginError):
+                broken.append({"kind": registry.kind, "error": str(entry)})
+                continue
+            rows.append(
+                {
+                    "kind": registry.kind,
+                    "name": entry.name,
+                    "origin": entry.origin,
+                    "traits": sorted(entry.traits),
+                    "summary": entry.summary,
+                }
+            )
+    wide = max((len(r["name"]) for r in rows), default=0)
+    for row in rows:
+        out.say(f"{row['kind']:<10} {row['name']:<{wide}}  {row['summary']}  [{row['origin']}]")
+    for row in broken:
+        out.say(f"{row['kind']:<10} cannot be used: {row['error']}")
+    out.json({"entries": rows, "broken": broken})
+    return 1 if broken else 0
+
+
+def run_check(args) -> int:
+    from bearcat.scenarios.cast import stream
+    from bearcat.scenarios.schema import load_scenario
+
+    scenario = load_scenario(args.scenario)
+    out = Output(args.json)
+    found, failed = [], 0
+    for agent in scenario.agents:
+        chosen = scenario.behaviour_of(agent.id)
+        row = {
+            "agent": agent.id,
+            "kind": "behaviour",
+            "name": chosen.entry.name,
+            "origin": chosen.entry.origin,
+            "options": msgspec.to_builtins(chosen.options),
+            "made": True,
+        }
+        try:
+            chosen.entry.factory(chosen.options, stream(scenario.seed, agent.id, "behaviour"))
+        except Exception as exc:
+            failed += 1
+            row["made"] = False
+            row["error"] = f"{type(exc).__name__}: {exc}"
+        found.append(row)
+        state = "loads" if row["made"] else f"FAILS to be made: {row['error']}"
+        out.say(f"{agent.id}: behaviour {row['name']} [{row['origin']}] with {row['options']}: {state}")
+    out.json(found)
+    return 1 if failed else 0

@@ -1,0 +1,105 @@
+"""Your own agents: what a plug-in implements, and the registries that find it.
+
+A scenario names a behaviour of one's own in its agent's table::
+
+    [[agent]]
+    id = "attacker"
+    behaviour = "sneaky.py:Sneaky"      # a file beside the scenario, or
+    # behaviour = "mypkg.tactics:Sneaky"  an importable module, or
+    # behaviour = "sneaky"                a name an installed distribution registers
+    options = { patience = 4.0 }        # read into Sneaky.Options
+
+and the class subclasses ``Behaviour``::
+
+    import numpy as np
+    from bearcat.plugins import Behaviour, Options
+
+    class Sneaky(Behaviour):
+        \"\"\"Creep toward the goal while nobody is near.\"\"\"
+
+        class Options(Options, frozen=True):
+            patience: float = 3.0
+
+        def __init__(self, options, rng):
+            self.patience = options.patience
+
+        def decide(self, now, me, screen, situation):
+            return situation.navigator.toward(situation.goal, me)
+
+A distribution makes a short name of it with an entry point::
+
+    [project.entry-points."bearcat.behaviours"]
+    sneaky = "mypkg.tactics:Sneaky"
+
+Every runtime takes it unchanged: ``bearcat simulate``, ``bearcat run``
+(each peer process imports it), ``bearcat study`` and ``bearcat
+experiment`` (locally or on Dask workers), fault plans and suites.
+``bearcat plugins list`` shows what is registered and ``bearcat plugins
+check SCENARIO`` imports and checks what a scenario names.
+
+A plug-in is untrusted code in a peer that must not die: an exception, an
+answer its protocol does not allow, or a live call past its budget is
+logged in one sentence, counted, recorded as a ``plugin`` event that
+``bearcat check`` judges, and that tick the agent stands still.
+"""
+
+from bearcat.agents.guard import PluginFault
+from bearcat.agents.human.behaviour import (
+    BEHAVIOURS,
+    COMMITS,
+    TAKES_KEYS,
+    TELLS,
+    Behaviour,
+    Commits,
+    Situation,
+    TakesKeys,
+    Tells,
+)
+from bearcat.agents.human.phone import Screen, Sighting
+from bearcat.agents.navigation import Navigator
+from bearcat.agents.options import (
+    Angle,
+    Distance,
+    Lag,
+    Memory,
+    NoOptions,
+    Options,
+    Period,
+    Point,
+    Route,
+    Share,
+)
+from bearcat.agents.registry import Entry, PluginError, Registry
+
+REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS,)
+"""Every kind of plug-in, each its registry."""
+
+__all__ = [
+    "BEHAVIOURS",
+    "COMMITS",
+    "REGISTRIES",
+    "TAKES_KEYS",
+    "TELLS",
+    "Angle",
+    "Behaviour",
+    "Commits",
+    "Distance",
+    "Entry",
+    "Lag",
+    "Memory",
+    "Navigator",
+    "NoOptions",
+    "Options",
+    "Period",
+    "PluginError",
+    "PluginFault",
+    "Point",
+    "Registry",
+    "Route",
+    "Screen",
+    "Share",
+    "Sighting",
+    "Situation",
+    "TakesKeys",
+    "Tells",
+]
