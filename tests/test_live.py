@@ -73,6 +73,7 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
         "verdict": True,
         "detection": None,
         "failsafe": None,
+        "plugins": True,
         "leftovers": True,
     }
     outcome = json.loads((out / "outcome.json").read_text())

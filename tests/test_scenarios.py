@@ -28,7 +28,10 @@ def test_the_studies_scenarios_are_built_in():
             "agent[0].behaviour: there is no behaviour 'fakeout'; the behaviours are follow-guidance, direct, "
             "fake-out, go-no-go, waypoints, patrol, keyboard, or name one of your own as module:attribute",
         ),
-        (("speed = 3.0", "sped = 3.0"), "agent[0]: unknown key 'sped'; the keys there are id, team, start, speed, behaviour"),
+        (
+            ("speed = 3.0", "sped = 3.0"),
+            "agent[0]: unknown key 'sped'; the keys there are id, team, start, speed, behaviour",
+        ),
         (('map = "field-50"', 'map = "field-5"'), "scenario.map: there is no built-in map 'field-5'"),
         (
             ('netem = "wifi"', 'netem = "lte"'),

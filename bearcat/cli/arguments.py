@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import math
+from pathlib import Path
 
 
 class UsageError(Exception):
@@ -117,6 +118,27 @@ def check_seeds(first: int, count: int) -> None:
     """Seeds ``first`` to ``first + count - 1`` must all be seeds."""
     if first + count - 1 > MAX_SEED:
         raise UsageError(f"--seed {first} with {count} trials runs past the largest seed, {MAX_SEED}")
+
+
+def change(text: str) -> tuple[str, object]:
+    """``KEY=VALUE`` as a variant's change: VALUE read as a TOML value
+    (``3.0``, ``true``, ``"fake-out"``, ``{ standoff = 3.0 }``), or as the
+    plain text it is when it is none. A plug-in named by a file relative to
+    this folder is named by its absolute path, which a worker in another
+    folder finds too."""
+    import tomllib
+
+    key, equals, value = text.partition("=")
+    if not equals or not key.strip():
+        raise argparse.ArgumentTypeError(f"{text!r} is not KEY=VALUE")
+    try:
+        read: object = tomllib.loads(f"v = {value}")["v"]
+    except tomllib.TOMLDecodeError:
+        read = value.strip()
+    if isinstance(read, str) and read.rpartition(":")[0].endswith(".py"):
+        where, _, attribute = read.rpartition(":")
+        read = f"{Path(where).resolve()}:{attribute}"
+    return key.strip(), read
 
 
 def add_batch_options(parser: argparse.ArgumentParser, what: str) -> None:

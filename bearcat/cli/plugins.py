@@ -40,7 +40,8 @@ def run_list(args) -> int:
     from bearcat.plugins import REGISTRIES
 
     out = Output(args.json)
-    rows, broken = [], []
+    rows: list[dict] = []
+    broken: list[dict] = []
     for registry in REGISTRIES:
         for entry in registry.entries():
             if isinstance(entry, PluginError):
@@ -58,8 +59,8 @@ def run_list(args) -> int:
     wide = max((len(r["name"]) for r in rows), default=0)
     for row in rows:
         out.say(f"{row['kind']:<10} {row['name']:<{wide}}  {row['summary']}  [{row['origin']}]")
-    for row in broken:
-        out.say(f"{row['kind']:<10} cannot be used: {row['error']}")
+    for failed in broken:
+        out.say(f"{failed['kind']:<10} cannot be used: {failed['error']}")
     out.json({"entries": rows, "broken": broken})
     return 1 if broken else 0
 
@@ -70,10 +71,11 @@ def run_check(args) -> int:
 
     scenario = load_scenario(args.scenario)
     out = Output(args.json)
-    found, failed = [], 0
+    found: list[dict[str, object]] = []
+    failed = 0
     for agent in scenario.agents:
         chosen = scenario.behaviour_of(agent.id)
-        row = {
+        row: dict[str, object] = {
             "agent": agent.id,
             "kind": "behaviour",
             "name": chosen.entry.name,

@@ -23,7 +23,7 @@ from bearcat.cli.arguments import Commands
 from bearcat.cli.output import Output
 from bearcat.cli.progress import counting
 from bearcat.cli.writing import make_directory, writing
-from bearcat.scenarios.schema import TRANSPORTS, Scenario
+from bearcat.scenarios.schema import TRANSPORTS, Scenario, ScenarioError
 from bearcat.studies.thesis import ABLATED, GUIDANCE, STUDIES
 
 
@@ -57,6 +57,15 @@ def register(commands: Commands) -> None:
         metavar="HZ",
         help="play only the cells of these report rates (holding, fake-out; default: every one)",
     )
+    p.add_argument(
+        "--vary",
+        action="append",
+        type=arguments.change,
+        metavar="KEY=VALUE",
+        help="change a scenario key in every game, as a variant does (a TOML value; repeatable), such as "
+        "'agent.attacker.behaviour=\"mine.py:Mine\"' to play a behaviour of one's own in the study; "
+        "a file named there is relative to this folder",
+    )
     arguments.add_batch_options(p, "games")
     p.add_argument("--out", type=Path, metavar="DIR", help="results directory (default ./studies/STUDY)")
     p.add_argument(
@@ -75,7 +84,7 @@ def register(commands: Commands) -> None:
 def run(args) -> int:
     from bearcat.netem.profiles import load_profile
     from bearcat.studies.batch import read_results, run_batch
-    from bearcat.studies.thesis import play_task, study_tasks
+    from bearcat.studies.thesis import play_task, study_tasks, unplayable
 
     for profile in args.netem or ():
         load_profile(profile)
@@ -102,9 +111,13 @@ def run(args) -> int:
             play_human_trials(out, args.human, args.trials, args.seed, say=report.say)
             results = read_results(out / "results.jsonl")  # the models' games beside the person's
         else:
+            changes = dict(args.vary or ())
             tasks = study_tasks(
-                args.study, args.trials, args.seed, args.netem, args.transport, args.guidance, args.rate
+                args.study, args.trials, args.seed, args.netem, args.transport, args.guidance, args.rate, changes
             )
+            why = unplayable(tasks)
+            if why is not None:
+                raise ScenarioError(why)
             for line in uncalibrated(tasks):
                 report.say(line)
             with counting(len(tasks), args.study, "game") as finished:
@@ -115,6 +128,7 @@ def run(args) -> int:
                     workers=args.workers,
                     scheduler=args.cluster,
                     on_result=finished,
+                    preflight=unplayable,
                 )
             wanted = {t["key"] for t in tasks}
             results = {k: r for k, r in results.items() if k in wanted}

@@ -62,6 +62,7 @@ def run_batch(
     workers: int | None = None,
     scheduler: str | None = None,
     on_result: Callable[[dict], None] | None = None,
+    preflight: Callable[[list[dict]], str | None] | None = None,
 ) -> dict[str, dict]:
     """Run ``work(task)`` for every task whose key is not yet in ``out`` and
     return all results by key, old and new. ``workers`` bounds the local
@@ -69,7 +70,10 @@ def run_batch(
     sends the tasks to a Dask cluster instead, whose scheduler and workers
     must be able to import ``work`` (the scheduler reads the tasks too) and
     run this machine's versions of ``SAME_EVERYWHERE``. ``on_result`` is
-    called once per finished task, old ones included, for a progress display."""
+    called once per finished task, old ones included, for a progress display.
+    ``preflight(tasks)`` says why a machine cannot play the tasks (None if
+    it can); every Dask worker is asked before the first task is sent, and
+    one that cannot is refused by name."""
     tasks = list(tasks)
     keys = [t["key"] for t in tasks]
     if len(set(keys)) != len(keys):
@@ -96,7 +100,7 @@ def run_batch(
         if scheduler is None:
             _run_local(todo, work, workers, record, out)
         else:
-            _run_dask(todo, work, scheduler, record, out)
+            _run_dask(todo, work, scheduler, record, out, preflight)
     return results
 
 
@@ -127,10 +131,14 @@ def _run_local(todo, work, workers, record, out) -> None:
             raise
 
 
-def _run_dask(todo, work, scheduler, record, out) -> None:
+def _run_dask(todo, work, scheduler, record, out, preflight) -> None:
     distributed = _distributed()
     with _connect(distributed.Client, scheduler) as client:
         _check_versions(client, scheduler)
+        if preflight is not None:
+            for worker, why in sorted(client.run(preflight, todo).items()):
+                if why is not None:
+                    raise BatchInterrupted(f"the Dask worker at {worker} cannot play these games: {why}")
         futures = client.map(work, todo, pure=False)
         try:
             for future in distributed.as_completed(futures):

@@ -25,6 +25,7 @@ resumable batch runner, seeded on its own, so any game can be replayed with
 
 from __future__ import annotations
 
+import json
 import statistics
 from collections import defaultdict
 from dataclasses import dataclass, field
@@ -193,15 +194,21 @@ def study_rates(study: str) -> list[float]:
 
 
 def study_tasks(
-    study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None, rates=None
+    study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None, rates=None, changes=None
 ) -> list[dict]:
     """The games of ``study``: per cell (of ``guidance`` and ``rates``, if
-    given), profile, transport (None: the scenario's), ``trials`` seeds."""
+    given), profile, transport (None: the scenario's), ``trials`` seeds.
+    ``changes`` (variant keys to values, ``scenarios.variants``) are made
+    in every cell's scenario on top of its own, such as another behaviour
+    for one side; they are part of each game's key, so a results file
+    keeps the games with and without them apart."""
     spec = STUDIES[study]
     tasks = []
     for cell in study_cells(study, guidance):
         if rates is not None and cell.labels.get("rate") not in rates:
             continue
+        if changes:
+            cell = Cell(cell.scenario, cell.changes | changes, cell.labels | {"changes": _described(changes)})
         for profile in profiles or spec.profiles:
             for transport in transports or (None,):
                 for s in range(seed, seed + trials):
@@ -221,6 +228,30 @@ def game_task(cell: Cell, profile: str | None, transport: str | None, seed: int)
         "transport": transport,
         "seed": seed,
     }
+
+
+def _described(changes: dict) -> str:
+    return ", ".join(f"{key} = {json.dumps(value)}" for key, value in changes.items())
+
+
+def unplayable(tasks: list[dict]) -> str | None:
+    """Why this process cannot play ``tasks``: the first of their
+    scenarios, with its changes, that cannot be read here (a plug-in it
+    names cannot be imported, say), in one sentence; None if all can."""
+    from bearcat.scenarios.schema import ScenarioError, load_scenario
+    from bearcat.scenarios.variants import vary
+
+    seen = set()
+    for task in tasks:
+        cell = (task["scenario"], json.dumps(task.get("changes") or {}, sort_keys=True))
+        if cell in seen:
+            continue
+        seen.add(cell)
+        try:
+            vary(load_scenario(task["scenario"]), task.get("changes") or {})
+        except ScenarioError as exc:
+            return str(exc)
+    return None
 
 
 def play_task(task: dict) -> dict:

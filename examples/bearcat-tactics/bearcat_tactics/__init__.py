@@ -1,0 +1,1 @@
+"""Tactics of one's own for bearcat, registered under its entry-point groups."""
