@@ -58,23 +58,33 @@ class Guard:
         self.clock = clock
         self.counts: Counter[Fault] = Counter()
         self.faults: list[PluginFault] = []  # every fault, in order; a runtime records those it has not yet
-        self._calls = 0
+        self._timed = 0  # timed calls so far
 
-    def call(self, now: float, method: Callable[..., Any], *args, check: Callable[[Any], str | None], fallback=None):
+    def call(
+        self,
+        now: float,
+        method: Callable[..., Any],
+        *args,
+        check: Callable[[Any], str | None],
+        fallback=None,
+        timed: bool = True,
+    ):
         """``method(*args)``, or ``fallback`` if it raised, ``check`` found a
         problem with its answer (a phrase such as ``returned a heading of
-        1e9 degrees``), or it ran past the budget."""
-        timed = self.clock is not None and self.budget is not None and self._calls > 0
-        self._calls += 1
-        began = self.clock() if timed and self.clock is not None else 0.0
+        1e9 degrees``), or it ran past the budget. A call made once before
+        the game (``timed`` False: making the plug-in) is held to no
+        budget, and neither is the first timed one."""
+        clock = self.clock if timed and self.budget is not None and self._timed > 0 else None
+        self._timed += timed
+        began = clock() if clock is not None else 0.0
         try:
             answer = method(*args)
         except Exception as exc:
             text = str(exc).splitlines()[0][:200] if str(exc) else ""
             self._fault(now, "raised", f"raised {type(exc).__name__}" + (f": {text}" if text else ""))
             return fallback
-        if timed and self.clock is not None and self.budget is not None:
-            took = self.clock() - began
+        if clock is not None and self.budget is not None:
+            took = clock() - began
             if took > self.budget:
                 self._fault(now, "overran", f"took {took * 1e3:.0f} ms, past its budget of {self.budget * 1e3:.0f} ms")
                 return fallback

@@ -145,12 +145,12 @@ class Registry(Generic[T]):
     def _from_reference(self, ref: str, base: Path | None) -> Entry[T]:
         where, _, attribute = ref.rpartition(":")
         if not where or not attribute:
-            raise PluginError(f"{self.kind} {ref!r} is not a name nor module:attribute")
+            raise PluginError(f"{ref!r} is not a name nor module:attribute")
         module = _file_module(ref, where, base) if where.endswith(".py") else _import(ref, where)
         found: Any = module
         for part in attribute.split("."):
             if not hasattr(found, part):
-                raise PluginError(f"{self.kind} {ref!r}: {where} has no attribute {attribute!r}")
+                raise PluginError(f"{ref!r}: {where} has no attribute {attribute!r}")
             found = getattr(found, part)
         return self._checked(found, ref, where)
 
@@ -171,15 +171,15 @@ class Registry(Generic[T]):
             )
         else:
             raise PluginError(
-                f"{self.kind} {name!r} is {_kind_of(found)}, neither an Entry nor a class that subclasses "
+                f"{name!r} is {_kind_of(found)}, neither an Entry nor a class that subclasses "
                 f"bearcat.plugins.{self.protocol.__name__}"
             )
         if not (inspect.isclass(entry.options_type) and issubclass(entry.options_type, msgspec.Struct)):
-            raise PluginError(f"{self.kind} {name!r}: its options type is {_kind_of(entry.options_type)}, not a Struct")
+            raise PluginError(f"{name!r}: its options type is {_kind_of(entry.options_type)}, not a Struct")
         unknown = sorted(entry.traits - self.traits)
         if unknown:
             known = ", ".join(sorted(self.traits)) or "none"
-            raise PluginError(f"{self.kind} {name!r} declares trait {unknown[0]!r}; a {self.kind}'s traits are {known}")
+            raise PluginError(f"{name!r} declares trait {unknown[0]!r}; a {self.kind}'s traits are {known}")
         return entry
 
 

@@ -576,7 +576,7 @@ def _person(
     budget = HumanAgent.period / 4 if spec.budget is None else spec.budget
     guard = Guard(spec.id, chosen.entry.name, budget, clock)
     rng = stream(seed, spec.id, "behaviour")
-    behaviour = guard.call(0.0, chosen.entry.factory, chosen.options, rng, check=_made(chosen.entry))
+    behaviour = guard.call(0.0, chosen.entry.factory, chosen.options, rng, check=_made(chosen.entry), timed=False)
     return HumanAgent(
         scenario.name,
         walker,
