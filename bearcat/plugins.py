@@ -26,10 +26,17 @@ and the class subclasses ``Behaviour``::
         def decide(self, now, me, screen, situation):
             return situation.navigator.toward(situation.goal, me)
 
-A distribution makes a short name of it with an entry point::
+A UAV tasking policy is the same, a ``TaskingPolicy`` subclass a UAV's
+table names (``search = "mine.py:Spiral"``, ``search_options = {...}``),
+whose ``next_point(uav, view)`` answers where the UAV searches next.
+
+A distribution makes a short name of either with an entry point::
 
     [project.entry-points."bearcat.behaviours"]
     sneaky = "mypkg.tactics:Sneaky"
+
+    [project.entry-points."bearcat.tasking"]
+    spiral = "mypkg.uav:Spiral"
 
 Every runtime takes it unchanged: ``bearcat simulate``, ``bearcat run``
 (each peer process imports it), ``bearcat study`` and ``bearcat
@@ -43,6 +50,7 @@ logged in one sentence, counted, recorded as a ``plugin`` event that
 ``bearcat check`` judges, and that tick the agent stands still.
 """
 
+from bearcat.agents.ground_station.tasking import NEEDS_SETS, TASKING, SearchView, TaskingPolicy, Uav
 from bearcat.agents.guard import PluginFault
 from bearcat.agents.human.behaviour import (
     BEHAVIOURS,
@@ -71,14 +79,16 @@ from bearcat.agents.options import (
 )
 from bearcat.agents.registry import Entry, PluginError, Registry
 
-REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS,)
+REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS, TASKING)
 """Every kind of plug-in, each its registry."""
 
 __all__ = [
     "BEHAVIOURS",
     "COMMITS",
+    "NEEDS_SETS",
     "REGISTRIES",
     "TAKES_KEYS",
+    "TASKING",
     "TELLS",
     "Angle",
     "Behaviour",
@@ -97,9 +107,12 @@ __all__ = [
     "Registry",
     "Route",
     "Screen",
+    "SearchView",
     "Share",
     "Sighting",
     "Situation",
     "TakesKeys",
+    "TaskingPolicy",
     "Tells",
+    "Uav",
 ]

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import os
 import re
 import subprocess
@@ -190,7 +191,7 @@ def test_an_entry_point_that_fails_to_load_is_named_with_its_distribution(tmp_pa
     listed = bearcat("plugins", "list", cwd=tmp_path, env={"PYTHONPATH": str(site)})
     assert listed.returncode == 1
     assert (
-        "behaviour  cannot be used: behaviour 'broken' that distribution broken-tactics registers as "
+        "behaviour       cannot be used: behaviour 'broken' that distribution broken-tactics registers as "
         "broken_tactics_gone:Broken cannot be loaded: ModuleNotFoundError: No module named 'broken_tactics_gone'"
     ) in listed.stdout
     (tmp_path / "game.toml").write_text(with_attacker(_table("broken")))
@@ -325,7 +326,7 @@ def test_a_simulated_run_records_each_fault_and_the_checker_judges_them(tmp_path
     findings = {f.name: f for f in check_run(run)}
     assert findings["plugins"].held is True
     assert "attacker's unruly.py:Unruly raised" in findings["plugins"].evidence
-    assert "the game to its verdict" in findings["plugins"].evidence
+    assert "each peer went on, and the game to its verdict" in findings["plugins"].evidence
 
 
 # ---------------------------------------------------------------- every runtime
@@ -436,3 +437,82 @@ def test_pages_text_matches_what_the_commands_print(folder):
     quoted = textwrap.dedent(PAGE.read_text().split("$ bearcat plugins check mine.toml\n")[1].split("```")[0])
     checked = bearcat("plugins", "check", "mine.toml", cwd=folder)
     assert checked.stdout == quoted
+
+
+# ---------------------------------------------------------------- UAV tasking
+
+CORNERS = '''
+from bearcat.plugins import Distance, Options, TaskingPolicy
+
+
+class Corners(TaskingPolicy):
+    """Fly between two corners of the map, ``inset`` metres in; fail on every third call."""
+
+    class Options(Options, frozen=True):
+        inset: Distance = 20.0
+
+    def __init__(self, options, rng):
+        self.inset, self.calls = options.inset, 0
+
+    def next_point(self, uav, view):
+        self.calls += 1
+        if self.calls % 3 == 0:
+            raise RuntimeError("third")
+        xmin, ymin, xmax, ymax = view.map.bounds
+        x = xmin + self.inset if self.calls % 2 else xmax - self.inset
+        return (x, ymax - self.inset), None
+'''
+
+
+def search_with(tmp_path, policy: str, options: str = "") -> Path:
+    """The search scenario, its UAV tasked by ``policy``."""
+    text = (ROOT / "bearcat" / "scenarios" / "data" / "search.toml").read_text()
+    text = text.replace('search = "reachability"', f'search = "{policy}"\n{options}').replace("240.0", "60.0")
+    (tmp_path / "search.toml").write_text(text)
+    return tmp_path / "search.toml"
+
+
+def test_a_tasking_policy_of_ones_own_flies_the_uav_and_its_faults_keep_the_last_task(tmp_path):
+    from bearcat.agents.ground_station.event_log import read_events
+    from bearcat.scenarios.schema import load_scenario
+
+    (tmp_path / "corners.py").write_text(CORNERS)
+    scenario = load_scenario(search_with(tmp_path, "corners.py:Corners", "search_options = { inset = 30.0 }"))
+    assert scenario.tasking_of("q1").options.inset == 30.0
+    outcome = simulate(scenario, events=tmp_path / "events.jsonl")
+    assert outcome.ended
+    events = read_events(tmp_path / "events.jsonl")
+    tasks = [e["message"] for e in events if e["event"] == "sent" and "/task" in e["key"]]
+    searching = [m for m in tasks if m["t"] < outcome.notes.get("search.found_at", math.inf)]  # then it tracks
+    places = {tuple(round(v) for v in scenario.map.to_local(m["lat"], m["lon"])) for m in searching}
+    xmin, _, xmax, ymax = scenario.map.bounds
+    assert places <= {(round(xmin + 30), round(ymax - 30)), (round(xmax - 30), round(ymax - 30))}, places
+    faults = [e for e in events if e["event"] == "plugin"]
+    assert faults and all(e["agent"] == "uav-tasking" and e["fault"] == "raised" for e in faults)
+    assert {e["peer"] for e in faults} == {"uav-tasking"}  # simulation gives each ground agent a session
+    # A failed second keeps the UAV on its last task: tasks go out every second regardless.
+    seconds = sorted({round(m["t"]) for m in tasks})
+    assert len(seconds) >= len({round(e["at"]) for e in faults}) and len(tasks) >= 0.9 * (seconds[-1] - seconds[0])
+
+
+def test_a_tasking_policy_that_answers_garbage_is_refused_for_that_second(tmp_path):
+    from bearcat.agents.ground_station.tasking import point_problem
+    from bearcat.maps import load_map
+
+    problem = point_problem(load_map("campus-250x200"))
+    assert problem(None) is None and problem(((10.0, 10.0), None)) is None and problem(((10.0, 10.0), 2)) is None
+    assert problem((10.0, 10.0)) == "returned (10.0, 10.0), not (point, tier) or None with the point (east, north)"
+    assert problem(((float("nan"), 1.0), None)) == "returned the point (nan, 1.0), which is not finite"
+    assert problem(((1e6, 1.0), None)) == "returned the point (1e+06, 1), off map campus-250x200"
+    assert problem(((1.0, 1.0), "top")) == "returned the tier 'top', not an integer or None"
+
+
+def test_an_installed_tasking_policy_plays_by_its_short_name(tactics, tmp_path):
+    listed = bearcat("plugins", "list", "--json", cwd=tmp_path, env={"PYTHONPATH": str(tactics)})
+    entries = {(e["kind"], e["name"]): e for e in json.loads(listed.stdout)["entries"]}
+    assert entries["tasking policy", "escort"]["origin"].startswith("distribution bearcat-tactics")
+    search_with(tmp_path, "escort")
+    ran = bearcat("simulate", "search.toml", "--json", cwd=tmp_path, env={"PYTHONPATH": str(tactics)})
+    assert ran.returncode == 0, ran.stderr
+    game = json.loads(ran.stdout.splitlines()[0])
+    assert game["plugin_faults"] == {} and game["reason"]

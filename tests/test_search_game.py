@@ -113,7 +113,9 @@ def test_the_uav_climbs_searches_once_a_second_and_its_camera_finds_the_defender
 
 def test_uav_tables_are_checked_key_by_key():
     with pytest.raises(
-        ScenarioError, match=r"uav\[0\]\.search: 'random' is not one of 'lawnmower', 'nearest', 'reachability'$"
+        ScenarioError,
+        match=r"uav\[0\]\.search: there is no tasking policy 'random'; the tasking policies are reachability, "
+        r"lawnmower, nearest, or name one of your own as module:attribute$",
     ):
         parse_scenario(_text(**{'search = "reachability"': 'search = "random"'}), source="s.toml")
     with pytest.raises(ScenarioError, match=r"uav\[0\]\.start: \[300.0, 12.0\] is off map campus-250x200"):
@@ -216,6 +218,8 @@ def test_uavs_of_one_side_search_by_one_strategy():
 
     mixed = _text() + '[[uav]]\nid = "q2"\nteam = "attacker"\nstart = [135.0, 12.0]\nsearch = "nearest"\n'
     with pytest.raises(
-        ScenarioError, match="the UAVs of a side search together, by one strategy; these mix nearest and reachability"
+        ScenarioError,
+        match="the UAVs of a side search together, by one policy with one set of options; these mix nearest and "
+        "reachability",
     ):
         _CtfGame(parse_scenario(mixed, source="mixed.toml")).tasker()

@@ -77,6 +77,7 @@ class Registry(Generic[T]):
     entry of this kind may declare."""
 
     kind: str
+    plural: str
     group: str
     protocol: type
     builtins: str
@@ -107,7 +108,7 @@ class Registry(Generic[T]):
             point = next((p for p in self._points() if p.name == ref), None)
             if point is None:
                 raise PluginError(
-                    f"there is no {self.kind} {ref!r}; the {self.kind}s are {', '.join(self.names())}, "
+                    f"there is no {self.kind} {ref!r}; the {self.plural} are {', '.join(self.names())}, "
                     f"or name one of your own as module:attribute"
                 )
             entry = self._from_point(point)

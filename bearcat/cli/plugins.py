@@ -57,10 +57,11 @@ def run_list(args) -> int:
                 }
             )
     wide = max((len(r["name"]) for r in rows), default=0)
+    kinds = max(len(registry.kind) for registry in REGISTRIES)
     for row in rows:
-        out.say(f"{row['kind']:<10} {row['name']:<{wide}}  {row['summary']}  [{row['origin']}]")
+        out.say(f"{row['kind']:<{kinds}}  {row['name']:<{wide}}  {row['summary']}  [{row['origin']}]")
     for failed in broken:
-        out.say(f"{failed['kind']:<10} cannot be used: {failed['error']}")
+        out.say(f"{failed['kind']:<{kinds}}  cannot be used: {failed['error']}")
     out.json({"entries": rows, "broken": broken})
     return 1 if broken else 0
 

@@ -142,7 +142,7 @@ class Dispatcher:
             for event in did[self._told.get(agent.name, 0) :]:
                 if isinstance(event, PluginFault):
                     fields = {k: v for k, v in vars(event).items() if k != "t"}
-                    self.record.note(self.now(), PLUGIN, at=event.t, **fields)
+                    self.record.note(self.now(), PLUGIN, at=event.t, peer=self._sessions[agent.name].name, **fields)
                     self.plugin_faults[f"{event.agent}/{event.plugin}/{event.fault}"] += 1
                 else:
                     t, what = event

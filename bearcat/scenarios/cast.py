@@ -31,8 +31,9 @@ from bearcat.agents.ground_station.guidance import (
 from bearcat.agents.ground_station.guidance.fixes import Uncertainty
 from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.agents.ground_station.sight import Sight
+from bearcat.agents.ground_station.tasking import Uav
 from bearcat.agents.ground_station.tracker import Motion, Trackers
-from bearcat.agents.ground_station.uav_tasking import Uav, UavTasker
+from bearcat.agents.ground_station.uav_tasking import PERIOD, UavTasker
 from bearcat.agents.guard import Guard
 from bearcat.agents.human.agent import HumanAgent
 from bearcat.agents.human.behaviour import Situation
@@ -49,10 +50,11 @@ from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Sc
 from bearcat.solvers.ctf_queries import CtfQueries
 
 log = logging.getLogger(__name__)
+TASKER = "uav-tasking"  # the name the ground station's UAV tasking goes by in logs and streams
 _UNCALIBRATED: set[tuple[str, str, float, tuple[str, ...]]] = set()
 """The scenarios, profiles and alphas this process has said it has no calibration of."""
 
-STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3}
+STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3, "tasking": 4}
 _Rules = TypeVar("_Rules", CtfRules, ReachAvoidRules, PursuitRules)
 
 
@@ -151,7 +153,7 @@ def build_cast(
         raise ScenarioError(
             f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
         )
-    game = GAMES[scenario.game](scenario, provisional=provisional)
+    game = GAMES[scenario.game](scenario, provisional=provisional, seed=seed, clock=clock)
     if scenario.uavs and not isinstance(game, _CtfGame):
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
@@ -203,8 +205,9 @@ def _uav_spec(scenario: Scenario, uav: str):
 class _CtfGame:
     """Capture-the-flag as the scenario sets it up (thesis 3.1.1, 3.5)."""
 
-    def __init__(self, scenario: Scenario, provisional: bool = False) -> None:
+    def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
         attackers, defenders = scenario.team("attacker"), scenario.team("defender")
+        self.seed, self.clock = seed, clock
         if len(attackers) != 1 or len(defenders) != 1:
             raise ScenarioError(f"{scenario.source}: capture-the-flag is 1 vs 1: one attacker and one defender")
         self.scenario = scenario
@@ -351,12 +354,17 @@ class _CtfGame:
                     f"{s.source}: only the attacker's side flies UAVs (thesis 6.2); "
                     f"uav {s.uav_of('defender')[0].id} is the defender's"
                 )
-            strategies = sorted({u.search for u in s.uavs})
-            if len(strategies) > 1:
+            chosen = [s.tasking_of(u.id) for u in s.uavs]
+            policies = sorted({c.entry.name for c in chosen})
+            if len(policies) > 1 or any(c.options != chosen[0].options for c in chosen):
                 raise ScenarioError(
-                    f"{s.source}: the UAVs of a side search together, by one strategy; "
-                    f"these mix {' and '.join(strategies)}"
+                    f"{s.source}: the UAVs of a side search together, by one policy with one set of options; "
+                    f"these mix {' and '.join(policies) if len(policies) > 1 else 'its options'}"
                 )
+            guard = Guard(TASKER, chosen[0].entry.name, PERIOD / 4, self.clock)
+            rng = stream(self.seed, TASKER, "tasking")
+            made = _made(chosen[0].entry, "next_point")
+            policy = guard.call(0.0, chosen[0].entry.factory, chosen[0].options, rng, check=made, timed=False)
             self._tasker = UavTasker(
                 s.name,
                 s.map,
@@ -365,9 +373,12 @@ class _CtfGame:
                 defender=self.defender.id,
                 defender_start=self.defender.start,
                 defender_speed=self.defender.speed,
-                strategy=strategies[0],
+                policy=policy,
+                entry=chosen[0].entry,
                 ctf=self.solved(),
                 sight=self.sight,
+                name=TASKER,
+                guard=guard,
             )
         return self._tasker
 
@@ -407,7 +418,7 @@ class _PursuitGame:
 
     awaited = None
 
-    def __init__(self, scenario: Scenario, provisional: bool = False) -> None:
+    def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
         self.scenario = scenario
         free = scenario.map.free_space
         if not abs(free.area - free.convex_hull.area) <= 1e-9 * free.area:
@@ -453,7 +464,7 @@ class _ReachAvoidGame:
 
     awaited = None
 
-    def __init__(self, scenario: Scenario, provisional: bool = False) -> None:
+    def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
         self.scenario = scenario
         attackers = scenario.team("attacker")
         if len(attackers) != 1:
@@ -576,7 +587,8 @@ def _person(
     budget = HumanAgent.period / 4 if spec.budget is None else spec.budget
     guard = Guard(spec.id, chosen.entry.name, budget, clock)
     rng = stream(seed, spec.id, "behaviour")
-    behaviour = guard.call(0.0, chosen.entry.factory, chosen.options, rng, check=_made(chosen.entry), timed=False)
+    made = _made(chosen.entry, "decide")
+    behaviour = guard.call(0.0, chosen.entry.factory, chosen.options, rng, check=made, timed=False)
     return HumanAgent(
         scenario.name,
         walker,
@@ -590,10 +602,10 @@ def _person(
     )
 
 
-def _made(entry: Entry):
-    """The check of what ``entry``'s factory made: an object that decides."""
+def _made(entry: Entry, method: str):
+    """The check of what ``entry``'s factory made: an object with the protocol's ``method``."""
 
     def check(made) -> str | None:
-        return None if callable(getattr(made, "decide", None)) else f"made {type(made).__name__}, which has no decide"
+        return None if callable(getattr(made, method, None)) else f"made {type(made).__name__}, which has no {method}"
 
     return check

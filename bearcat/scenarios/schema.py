@@ -27,7 +27,8 @@ whether their phone shows reachability guidance::
     team = "attacker"
     start = [25.0, 30.0]         # map metres (east, north)
     speed = 3.0                  # top speed, m/s on full-speed terrain
-    behaviour = "fake-out"
+    behaviour = "fake-out"       # a built-in, or one's own: "file.py:Class", "module:Class" or an installed name
+    options = { spread = 80.0 }  # the behaviour's options
     aided = true
     uncertainty = "none"         # optional: this agent's own, instead of guidance.uncertainty
 
@@ -37,7 +38,8 @@ whether their phone shows reachability guidance::
     start = [125.0, 12.0]        # where it takes off, map metres
     altitude = 20.0              # m above home
     camera_radius = 15.0         # r_q: the camera sees a disk this wide on the ground
-    search = "reachability"      # reachability | lawnmower | nearest
+    search = "reachability"      # reachability | lawnmower | nearest | a tasking policy of one's own
+    search_options = {}          # the policy's options
     steer = "goto"               # goto | velocity (offboard setpoints)
 
 The Structs below are the schema: every key with its type, its bounds and
@@ -61,9 +63,10 @@ import tomli_w
 from msgspec import Meta
 from shapely.geometry import Polygon
 
+from bearcat.agents.ground_station.tasking import TASKING
 from bearcat.agents.human.behaviour import BEHAVIOURS, COMMITS
 from bearcat.agents.options import Angle, Options, Period, Point
-from bearcat.agents.registry import Entry, PluginError
+from bearcat.agents.registry import Entry, PluginError, Registry
 from bearcat.agents.uav.agent import Failsafe, Steering
 from bearcat.bus.messages import Name
 from bearcat.bus.validation import Invalid, convert, not_one_of
@@ -183,7 +186,8 @@ class UavSpec(_Table, frozen=True):
     camera_radius: Radius = 15.0
     speed: Annotated[float, Meta(gt=0.0, le=40.0, extra={"unit": "m/s"})] = 8.0
     accel: Annotated[float, Meta(gt=0.0, le=20.0, extra={"unit": "m/s^2"})] = 3.0
-    search: Literal["reachability", "lawnmower", "nearest"] = "reachability"
+    search: PluginName = "reachability"  # the tasking policy: a plug-in of TASKING
+    search_options: dict[str, Any] = {}  # read into the policy's options type (Scenario.tasking_of)
     failsafe: Failsafe = "hold"
     link_timeout: Period = 5.0
     fix_rate: Rate = 2.0
@@ -303,11 +307,16 @@ class Scenario:
     defender_quantile: float = 0.5  # calibrated: the share of the belief the defender may lose against
     ablate: tuple[str, ...] = ()  # calibrated: parts switched off (ABLATIONS)
     behaviours: dict[str, Plugged] = field(default_factory=dict)  # agent -> its behaviour, options read
+    tasking: dict[str, Plugged] = field(default_factory=dict)  # UAV -> its tasking policy, options read
     directory: Path | None = None  # the folder of the scenario's file, which file.py:attribute plug-ins are in
 
     def behaviour_of(self, agent: str) -> Plugged:
         """How ``agent`` decides: its behaviour's entry, with the options the scenario gives it."""
         return self.behaviours[agent]
+
+    def tasking_of(self, uav: str) -> Plugged:
+        """How the ground station tasks ``uav``: its policy's entry, with the options the scenario gives it."""
+        return self.tasking[uav]
 
     @property
     def committing(self) -> frozenset[str]:
@@ -385,7 +394,8 @@ def parse_scenario(
                 game_map = load_map(head.map)
             except MapError as exc:
                 raise Invalid("scenario.map", str(exc)) from None
-        behaviours = _behaviours(file.agent, directory)
+        behaviours = _plugged(BEHAVIOURS, "agent", [(a.id, a.behaviour, a.options) for a in file.agent], directory)
+        tasking = _plugged(TASKING, "uav", [(u.id, u.search, u.search_options) for u in file.uav], directory)
         _check_against(file, rules, game_map, behaviours)
         text = _located(text, data, directory)
     except (Invalid, MapError) as exc:
@@ -414,6 +424,7 @@ def parse_scenario(
         lease=head.lease,
         faults=file.fault,
         behaviours=behaviours,
+        tasking=tasking,
         directory=directory,
     )
 
@@ -423,29 +434,34 @@ def _located(text: str, data: dict, directory: Path | None) -> str:
     folder, the same scenario naming that file by its absolute path: the
     text a run keeps and serves, which its peers and checker read from
     other folders."""
+    named = [(agent, "behaviour") for agent in data["agent"]] + [(uav, "search") for uav in data.get("uav", ())]
     relative = [
-        agent
-        for agent in data["agent"]
-        if agent["behaviour"].rpartition(":")[0].endswith(".py")
-        and not Path(agent["behaviour"].rpartition(":")[0]).is_absolute()
+        (table, key)
+        for table, key in named
+        if key in table
+        and table[key].rpartition(":")[0].endswith(".py")
+        and not Path(table[key].rpartition(":")[0]).is_absolute()
     ]
     if not relative:
         return text
-    for agent in relative:
-        where, _, attribute = agent["behaviour"].rpartition(":")
-        agent["behaviour"] = f"{((directory or Path.cwd()) / where).resolve()}:{attribute}"
+    for table, key in relative:
+        where, _, attribute = table[key].rpartition(":")
+        table[key] = f"{((directory or Path.cwd()) / where).resolve()}:{attribute}"
     return tomli_w.dumps(data)
 
 
-def _behaviours(agents: tuple[AgentSpec, ...], directory: Path | None) -> dict[str, Plugged]:
-    """Each agent's behaviour from its registry, with its options read into the behaviour's type."""
+def _plugged(registry: Registry, kind: str, named, directory: Path | None) -> dict[str, Plugged]:
+    """For each (id, plug-in, options) of the ``kind`` tables, its entry from
+    ``registry`` with the options read into its type."""
+    key, options_key = {"agent": ("behaviour", "options"), "uav": ("search", "search_options")}[kind]
     chosen = {}
-    for k, agent in enumerate(agents):
+    for k, (name, ref, options) in enumerate(named):
         try:
-            entry = BEHAVIOURS.get(agent.behaviour, directory)
+            entry = registry.get(ref, directory)
         except PluginError as exc:
-            raise Invalid(f"agent[{k}].behaviour", str(exc)) from None
-        chosen[agent.id] = Plugged(entry, convert(agent.options, entry.options_type, at=f"agent[{k}].options"))
+            raise Invalid(f"{kind}[{k}].{key}", str(exc)) from None
+        read = convert(options, entry.options_type, at=f"{kind}[{k}].{options_key}")
+        chosen[name] = Plugged(entry, read)
     return chosen
 
 

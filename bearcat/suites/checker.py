@@ -20,8 +20,9 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   within its ``link_timeout`` after it vanished;
 - ``plugins``: every fault of a plug-in (``agents.guard``: it raised,
   answered what its protocol does not allow, or overran its budget) left
-  its agent going: the agent reported on after it, or the game ended
-  within ``IN_FLIGHT`` s of it, and the game ended with a verdict;
+  its peer going: the peer sent on after it (a walker its truth, the
+  ground station its state and UAV tasks), or the game ended within
+  ``IN_FLIGHT`` s of it; and the game ended with a verdict;
 - ``leftovers``: no process the run started still runs, and a kernel run
   left neither its link nor its route in the host's namespace. The run
   names its own (``runtime.processes``, ``endpoint.json``): a process is
@@ -350,17 +351,16 @@ def _plugins(run: Run) -> Finding:
         return Finding("plugins", False, f"{said}, and the game ended without a verdict (first: {first})")
     last_fault: dict[str, float] = {}
     for e in faults:
-        last_fault[e["agent"]] = max(last_fault.get(e["agent"], e["at"]), e["at"])
-    reported: dict[str, float] = {}
-    for e in run.events:
-        if e["event"] == "sent" and _kind(e["key"]) == "truth":
-            reported[e["message"]["agent"]] = e["t"]
-    for agent, at in last_fault.items():
-        if reported.get(agent, -math.inf) < at and end - at > IN_FLIGHT:
-            return Finding(
-                "plugins", False, f"{agent} reported nothing after its plug-in's fault at {at:.1f} s: {said}"
-            )
-    return Finding("plugins", True, f"{said}; each agent went on, and the game to its verdict (first: {first})")
+        last_fault[e["peer"]] = max(last_fault.get(e["peer"], e["at"]), e["at"])
+    sent: dict[str, float] = {}
+    for e in run.records():
+        if e["event"] == "sent":
+            sent[e["sender"]] = max(sent.get(e["sender"], e["t"]), e["t"])
+    for peer, at in last_fault.items():
+        if sent.get(peer, -math.inf) < at and end - at > IN_FLIGHT:
+            why = f"peer {peer} sent nothing after its plug-in's fault at {at:.1f} s: {said}"
+            return Finding("plugins", False, why)
+    return Finding("plugins", True, f"{said}; each peer went on, and the game to its verdict (first: {first})")
 
 
 def _leftovers(run: Run) -> Finding:

@@ -93,6 +93,7 @@ NEEDS_SETS = "needs-sets"
 
 TASKING: Registry[TaskingPolicy] = Registry(
     kind="tasking policy",
+    plural="tasking policies",
     group="bearcat.tasking",
     protocol=TaskingPolicy,
     builtins="bearcat.agents.ground_station.tasking_policies",
@@ -115,7 +116,7 @@ def point_problem(game_map: Map) -> Callable[[Any], str | None]:
         try:
             x, y = (float(v) for v in point)
         except (TypeError, ValueError):
-            return f"returned the point {_shown(point)}, not (east, north)"
+            return f"returned {_shown(answer)}, not (point, tier) or None with the point (east, north)"
         if not (math.isfinite(x) and math.isfinite(y)):
             return f"returned the point {_shown(point)}, which is not finite"
         if not (xmin <= x <= xmax and ymin <= y <= ymax):

@@ -4,11 +4,13 @@ Once a second the ground station updates P_D, where the defender may be,
 from what the attacking side saw since (the attacker's line of sight V_A
 from its last fix, every UAV's camera disk V_Q from its last fix, a
 detection or a sighting collapsing it onto the defender), and sends each
-UAV its next point: by the reachability hierarchy of eqs. 6.7-6.9, by a
-lawnmower sweep, or to the nearest point where the defender may be. With
-several UAVs the points are chosen in turn, each UAV treating the ground
-the ones before it are bound for as about to be seen, so two UAVs do not
-search the same place. While the defender is in sight the UAVs track it,
+UAV the next point its tasking policy (``tasking``: the reachability
+hierarchy of eqs. 6.7-6.9, a lawnmower sweep, the nearest point where the
+defender may be, or one's own) chooses. With several UAVs the points are
+chosen in turn, each UAV treating the ground the ones before it are bound
+for as about to be seen, so two UAVs do not search the same place. The
+policy is called through a guard: when it fails, the UAV keeps its last
+task for that second. While the defender is in sight the UAVs track it,
 as in the 6.2.4 trials. Tasks go out every second even when they have not
 changed: they are also each UAV's sign that the ground station is there
 (its failsafe waits on them).
@@ -26,7 +28,10 @@ import shapely
 import shapely.ops
 from scipy.interpolate import RegularGridInterpolator
 
+from bearcat.agents.ground_station.tasking import NEEDS_SETS, SearchView, TaskingPolicy, Uav, point_problem
+from bearcat.agents.guard import Guard, PluginFault
 from bearcat.agents.protocol import Send
+from bearcat.agents.registry import Entry
 from bearcat.bus import keys
 from bearcat.bus.messages import Detection, Fix, GameState, Message, UavTask
 from bearcat.maps import Map
@@ -38,16 +43,6 @@ from bearcat.solvers.errors import InputError
 PERIOD = 1.0  # s between updates and tasks
 TRACK_FOR = 3.0  # s the UAV keeps tracking the defender's last sighting
 PRIOR_RADIUS = 5.0  # m: P_D at the start, around the defender's known starting point
-
-
-@dataclass(frozen=True)
-class Uav:
-    """One UAV as the tasker flies it: its name, speed, camera radius r_q and altitude."""
-
-    name: str
-    speed: float
-    camera_radius: float
-    altitude: float
 
 
 @dataclass
@@ -78,21 +73,26 @@ class UavTasker:
         defender: str,
         defender_start,
         defender_speed: float,
-        strategy: str = "reachability",
+        policy: TaskingPolicy,
+        entry: Entry,
         ctf: CtfQueries | None = None,
         sight,
         spacing: float = 2.0,
         name: str = "uav-tasking",
+        guard: Guard | None = None,
     ) -> None:
-        if strategy == "reachability" and ctf is None:
-            raise InputError("reachability-guided search needs the capture-the-flag solution")
+        if entry.has(NEEDS_SETS) and ctf is None:
+            raise InputError(f"UAV tasking by {entry.name} needs the capture-the-flag solution")
         self.game, self.name, self.map = game, name, game_map
         self.uavs = tuple(uavs)
         if not self.uavs:
             raise InputError("UAV tasking needs at least one UAV")
         self.attacker, self.defender = attacker, defender
         self.defender_speed = float(defender_speed)
-        self.strategy, self.ctf, self.sight = strategy, ctf, sight
+        self.policy, self.strategy, self.ctf, self.sight = policy, entry.name, ctf, sight
+        self.guard = guard or Guard(name, entry.name)
+        self._check = point_problem(game_map)
+        self.events: list[PluginFault] = []  # the guard's faults, which the runtime records
         self.subscriptions = (keys.every(game, "fix"), keys.every(game, "detection"), keys.state(game))
         raster = rasterize(game_map, spacing)
         self.grid, self.terrain = raster.grid, raster.speed
@@ -101,13 +101,12 @@ class UavTasker:
         # Free space shrunk by a node, so a point moved into it lands on free nodes.
         self._inside = game_map.free_space.buffer(-max(self.grid.spacing))
         self.possible = search.PossibleDefender.around(self.terrain, self.grid, defender_start, PRIOR_RADIUS)
-        self.picture = Picture(possible=self.possible.mask, strategy=strategy)
+        self.picture = Picture(possible=self.possible.mask, strategy=entry.name)
         self.running = False
         self.ended = False
         self._fixes: dict[str, tuple[np.ndarray, float]] = {}
         self._seen: tuple[np.ndarray, float] | None = None  # the defender's last sighting by the attacking side
         self._last_update: float | None = None
-        self._sweeps: dict[str, list] = {}  # UAV -> [waypoints, index]
         self._seq = 0
         self._phase = "return"
 
@@ -156,7 +155,7 @@ class UavTasker:
             if tracked is not None:
                 target, tier = tuple(tracked[0]), None
             else:
-                target, tier = self._choose(u, a, seen_a, seen_q | claimed)
+                target, tier = self._choose(now, u, a, seen_a, seen_q | claimed)
             self.picture.targets[u.name], self.picture.tiers[u.name] = target, tier
             if target is None:
                 continue
@@ -166,6 +165,7 @@ class UavTasker:
             task = UavTask(uav=u.name, seq=self._seq, t=now, kind="search", lat=lat, lon=lon, alt=u.altitude)
             out.append(Send(keys.uav_task(self.game, u.name), task))
         self.picture.updates += 1
+        self.events += self.guard.faults[len(self.events) :]
         return out
 
     # ------------------------------------------------------------------ sensing
@@ -193,41 +193,29 @@ class UavTasker:
 
     # ------------------------------------------------------------------ where next
 
-    def _choose(self, u: Uav, a, seen_a, seen_q):
-        """UAV ``u``'s next point; ``seen_q`` holds what the cameras see and
+    def _choose(self, now: float, u: Uav, a, seen_a, seen_q):
+        """UAV ``u``'s next point and its tier, by the policy; its last one
+        if the policy failed. ``seen_q`` holds what the cameras see and
         where the UAVs tasked before it are bound."""
-        at = self._fixes[u.name][0]
-        possible = self.possible.mask & ~seen_q
-        if self.strategy == "reachability":
-            found = search.search_target(
-                self.terrain,
-                self.grid,
-                possible,
-                seen_a,
-                seen_q,
-                self._defender_wins(a),
-                attacker=a,
-                uav=at,
-                defender_speed=self.defender_speed,
-                uav_speed=u.speed,
-                uav_radius=u.camera_radius,
-            )
-            return found.target, found.tier
-        if self.strategy == "nearest":
-            return search.nearest_unobserved(self.grid, possible, at), None
-        return self._next_sweep_point(u, at), None
-
-    def _next_sweep_point(self, u: Uav, at) -> tuple[float, float]:
-        """The lawnmower: UAV k of n starts k/n of the way along the sweep."""
-        if u.name not in self._sweeps:
-            path = search.lawnmower(self.map.bounds, u.camera_radius, start=at)
-            k = [v.name for v in self.uavs].index(u.name)
-            self._sweeps[u.name] = [path, k * len(path) // len(self.uavs)]
-        path, index = self._sweeps[u.name]
-        if np.hypot(*(path[index] - at)) <= max(2.0, 0.2 * u.camera_radius):
-            self._sweeps[u.name][1] = index = (index + 1) % len(path)
-        x, y = path[index]
-        return float(x), float(y)
+        view = SearchView(
+            map=self.map,
+            grid=self.grid,
+            terrain=self.terrain,
+            possible=self.possible.mask & ~seen_q,
+            seen_by_attacker=seen_a,
+            seen_by_uavs=seen_q,
+            attacker=a,
+            at=self._fixes[u.name][0],
+            defender_speed=self.defender_speed,
+            defender_wins=lambda: self._defender_wins(a),
+            uavs=self.uavs,
+        )
+        last = (self.picture.targets.get(u.name), self.picture.tiers.get(u.name))
+        answer = self.guard.call(now, self.policy.next_point, u, view, check=self._check, fallback=last)
+        if answer is None:
+            return None, None
+        target, tier = answer
+        return (None if target is None else (float(target[0]), float(target[1]))), tier
 
     def worst_case(self, attacker, values=None) -> tuple[float, float] | None:
         """The place in P_D where the defender would do best against an

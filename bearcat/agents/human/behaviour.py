@@ -102,6 +102,7 @@ class Tells(Protocol):
 
 BEHAVIOURS: Registry[Behaviour] = Registry(
     kind="behaviour",
+    plural="behaviours",
     group="bearcat.behaviours",
     protocol=Behaviour,
     builtins="bearcat.agents.human.behaviours",
