@@ -20,10 +20,10 @@ from msgspec import Meta
 from shapely.geometry import LineString, MultiLineString, MultiPolygon, Point, Polygon, mapping, shape
 from shapely.geometry.polygon import orient
 
-from bearcat.bus.validation import Invalid, convert, describe
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
 from bearcat.maps.model import Map, Region, Role, SpeedFactor, Zone, check_origin, check_polygonal
+from bearcat.validation import Invalid, convert, describe
 
 log = logging.getLogger(__name__)
 

@@ -16,9 +16,9 @@ import shapely
 from msgspec import Meta
 from shapely.geometry import MultiPolygon, Point, Polygon
 
-from bearcat.bus.validation import Invalid, convert
 from bearcat.maps import geodesy
 from bearcat.maps.errors import MapError
+from bearcat.validation import Invalid, convert
 
 Role = Literal["flag", "return", "target", "side"]
 ROLES: tuple[Role, ...] = get_args(Role)

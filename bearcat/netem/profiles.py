@@ -15,7 +15,6 @@ from typing import Annotated
 import msgspec
 from msgspec import Meta
 
-from bearcat.bus.validation import Invalid, convert
 from bearcat.netem.models import (
     CompassError,
     Delay,
@@ -26,6 +25,7 @@ from bearcat.netem.models import (
     Outage,
     Probability,
 )
+from bearcat.validation import Invalid, convert
 
 
 class ProfileError(ValueError):

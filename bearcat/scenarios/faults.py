@@ -43,8 +43,8 @@ from msgspec import Meta
 
 from bearcat.bus.keys import GROUND
 from bearcat.bus.messages import Name
-from bearcat.bus.validation import Invalid, convert
 from bearcat.netem.profiles import load_profiles
+from bearcat.validation import Invalid, convert
 
 GROUND_AGENTS = (GROUND, "referee", "uav-tasking")
 """The agents the ground station's process holds: the guidance service, the referee and the UAV tasking."""

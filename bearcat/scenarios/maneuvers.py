@@ -27,13 +27,13 @@ from msgspec import Meta
 
 from bearcat.agents.cache import cache_root, write_atomically
 from bearcat.agents.ground_station.ctf_cache import solver_fingerprint
-from bearcat.bus.validation import Invalid, convert
 from bearcat.solvers.backflip import Backflip, BackflipSets, SetProgress, TargetBox, design
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.hji import ReachAvoidResult
 from bearcat.solvers.maneuver import Containment
 from bearcat.solvers.planar_quad import Laws, Quadrotor
+from bearcat.validation import Invalid, convert
 
 log = logging.getLogger(__name__)
 

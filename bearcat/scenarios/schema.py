@@ -69,12 +69,12 @@ from bearcat.agents.options import Angle, Options, Period, Point
 from bearcat.agents.registry import Entry, PluginError, Registry
 from bearcat.agents.uav.agent import Failsafe, Steering
 from bearcat.bus.messages import Name
-from bearcat.bus.validation import Invalid, convert, not_one_of
 from bearcat.maps import Map, MapError, load_map
 from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
 from bearcat.scenarios.faults import Fault, check_faults
 from bearcat.solvers.devices import DEVICES
+from bearcat.validation import Invalid, convert, not_one_of
 
 Game = Literal["ctf", "reach-avoid", "pursuit"]
 Team = Literal["attacker", "defender", "evader", "pursuer"]

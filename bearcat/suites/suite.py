@@ -36,12 +36,12 @@ import msgspec
 from msgspec import Meta
 
 from bearcat.bus.messages import Name
-from bearcat.bus.validation import Invalid, convert
 from bearcat.runtime.run_directory import write_scenario
 from bearcat.scenarios.faults import Fault, FaultError, check_faults, load_faults, refusal, write_faults
 from bearcat.scenarios.schema import Scenario, ScenarioError, list_scenarios, load_scenario
 from bearcat.scenarios.variants import vary
 from bearcat.suites.checker import INVARIANTS, Run, check_run, detected_after
+from bearcat.validation import Invalid, convert
 
 RUNTIMES = ("simulate", "live")
 

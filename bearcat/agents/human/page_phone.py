@@ -28,8 +28,8 @@ from bearcat.agents.protocol import Send
 from bearcat.bus import keys
 from bearcat.bus.codec import Refused, decode, encode
 from bearcat.bus.messages import Control, Fix, GameState, Guidance, Heading, Latitude, Longitude, Message, Metres
-from bearcat.bus.validation import Invalid, convert
 from bearcat.maps import Map
+from bearcat.validation import Invalid, convert
 
 TICK = 0.1  # s between the sends of what the page reported
 HELD = 20  # fixes held for the next tick at most: a page that floods loses the oldest
