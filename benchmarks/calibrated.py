@@ -55,8 +55,8 @@ def on_grid(queries, game_map, n: int, directory: str):
     resampled where finite and is infinite wherever the value says the
     defender wins, as a solve leaves it."""
     from bearcat.maps.ctf import ctf_geometry
-    from bearcat.solvers.ctf import CtfSolution, SetSolution
-    from bearcat.solvers.ctf_queries import CtfQueries
+    from bearcat.solvers.ctf.queries import CtfQueries
+    from bearcat.solvers.ctf.sets import CtfSolution, SetSolution
 
     sets = {}
     for name, found in queries.solution.sets.items():

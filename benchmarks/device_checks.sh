@@ -58,7 +58,7 @@ for line in extra:
 if missing:
     sys.exit(f"the [cuda] extra is not met ({', '.join(missing)}): carry its wheels in .whl/ (see this script's head)")
 
-from bearcat.solvers.devices import choose_device
+from bearcat.solvers.levelset.devices import choose_device
 from bearcat.solvers.errors import InputError
 
 try:

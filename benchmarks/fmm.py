@@ -19,9 +19,9 @@ import time
 import numpy as np
 import skfmm
 
-from bearcat.solvers.fmm import point_source, travel_time
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.openloop import Defender, solve_openloop
+from bearcat.solvers.marching.fmm import point_source, travel_time
+from bearcat.solvers.marching.openloop import Defender, solve_openloop
 
 REPEATS = {400: 9, 1000: 5, 2000: 3}
 
@@ -98,7 +98,7 @@ FIRST_CALL = textwrap.dedent(
     t = time.perf_counter()
     import numpy as np
     from bearcat.solvers.grid import Grid
-    from bearcat.solvers.openloop import Defender, solve_openloop
+    from bearcat.solvers.marching.openloop import Defender, solve_openloop
     g = Grid.covering((0, 0), (30, 30), 0.5)
     v = np.ones(g.shape)
     x, y = g.mesh()

@@ -27,7 +27,7 @@ The problem is the flag-return stage of 1 vs 1 capture-the-flag (thesis
 within ``r_c = 0.5`` of the defender (disturbance, axes 2-3), who forfeits by
 entering the strip; both at speed 1. hj_reachability gets the same reach-avoid
 update (``max(min(J, l), -g)`` after every step), the same ghost extrapolation
-(``solvers.hji``: values rise beyond the attacker's edges and fall beyond the
+(``solvers.levelset.hji``: values rise beyond the attacker's edges and fall beyond the
 defender's), its own WENO5 + TVD-RK3 (``"very_high"``) or first-order upwind +
 Euler (``"low"``) and its default global Lax-Friedrichs dissipation, which for
 these dynamics equals ours.
@@ -64,8 +64,8 @@ def problem(n: int):
 
 
 def run_ours(n: int, scheme: str, horizon: float, tol: float, local: bool, device: str = "cpu") -> dict:
-    from bearcat.solvers.hamiltonians import SimpleMotion
-    from bearcat.solvers.hji import solve_reach_avoid
+    from bearcat.solvers.levelset.hamiltonians import SimpleMotion
+    from bearcat.solvers.levelset.hji import solve_reach_avoid
 
     grid, target, avoid = problem(n)
     game = SimpleMotion.pursuit(1.0, 1.0)
@@ -161,9 +161,9 @@ def run_game(n: int, local: bool, mask: str, device: str = "cpu") -> dict:
     the solve many times over)."""
     from bearcat.maps import load_map
     from bearcat.maps.ctf import ctf_geometry
-    from bearcat.solvers.ctf import Rules, solve_ctf
-    from bearcat.solvers.ctf_queries import CtfQueries
-    from bearcat.solvers.hji import required_bytes
+    from bearcat.solvers.ctf.queries import CtfQueries
+    from bearcat.solvers.ctf.sets import Rules, solve_ctf
+    from bearcat.solvers.levelset.hji import required_bytes
 
     rules = Rules(GAME_SPEED, GAME_SPEED, GAME_CAPTURE_RADIUS, GAME_HORIZON, GAME_HORIZON)
     game_map = load_map(GAME_MAP)
@@ -564,8 +564,8 @@ GPU_TARGET_COMPILE_S = 15.0  # the kernels' first compile
 
 def gpu_or_refusal() -> str:
     """The GPU's name, or exit with one sentence saying why none will do."""
-    from bearcat.solvers.devices import choose_device
     from bearcat.solvers.errors import InputError
+    from bearcat.solvers.levelset.devices import choose_device
 
     try:
         chosen = choose_device("cuda")
@@ -582,8 +582,8 @@ def gpu_or_refusal() -> str:
 def run_compile() -> dict:
     """Seconds of the first CUDA solve in this process, on a 9^4 grid: the
     kernels' compile if numba's cache is empty, their load if not."""
-    from bearcat.solvers.hamiltonians import SimpleMotion
-    from bearcat.solvers.hji import solve_reach_avoid
+    from bearcat.solvers.levelset.hamiltonians import SimpleMotion
+    from bearcat.solvers.levelset.hji import solve_reach_avoid
 
     grid, target, avoid = problem(9)
     game = SimpleMotion.pursuit(1.0, 1.0)

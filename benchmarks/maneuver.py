@@ -15,7 +15,7 @@ loops are written twice, once as bearcat's compiled laws and once in
 membership the two solvers disagree on) is the check that they match.
 
 hj_reachability gets the same update as bearcat's capture set, ``min(V, l)``
-after every step (the monotone clamp of ``solvers.hji`` is off here, since
+after every step (the monotone clamp of ``solvers.levelset.hji`` is off here, since
 hj_reachability has none), and the same ghost extrapolation: values rise
 beyond every edge, so leaving the grid never helps the side reaching for the
 set.
@@ -110,7 +110,7 @@ def _rising_edges():
 
 
 def run_ours(grid, dynamics, value_target, horizon: float, role: str):
-    from bearcat.solvers.maneuver import avoid_set, capture_set
+    from bearcat.solvers.maneuvers.sets import avoid_set, capture_set
 
     solve = capture_set if role == "disturbance" else avoid_set
     small = type(grid).spanning(grid.lo, grid.hi, (9, 9))
@@ -126,9 +126,9 @@ def main() -> None:
     args = parser.parse_args()
 
     from bearcat.scenarios.maneuvers import load_maneuver
-    from bearcat.solvers import backflip as bf
     from bearcat.solvers.grid import Grid
-    from bearcat.solvers.planar_quad import DRIFT, IMPULSE, RECOVERY
+    from bearcat.solvers.maneuvers import backflip as bf
+    from bearcat.solvers.maneuvers.planar_quad import DRIFT, IMPULSE, RECOVERY
 
     design = load_maneuver("backflip").design
     if args.quick:

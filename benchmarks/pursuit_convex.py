@@ -26,7 +26,7 @@ import time
 import numpy as np
 from shapely.geometry import Polygon
 
-from bearcat.solvers.pursuit import ConvexAreaPursuit, area_minimising_headings
+from bearcat.solvers.pursuit.convex import ConvexAreaPursuit, area_minimising_headings
 
 SQUARE = np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]])
 STATES = 2000

@@ -21,7 +21,7 @@ import time
 import numpy as np
 
 from bearcat.maps import load_map, rasterize
-from bearcat.solvers.pursuit_fmm import FarthestPointEvader, FmmAreaPursuit, GeodesicPursuit, TravelTimes
+from bearcat.solvers.pursuit.fmm import FarthestPointEvader, FmmAreaPursuit, GeodesicPursuit, TravelTimes
 
 MAPS = ("triangle-10", "maze-10")
 SPACING = 0.1

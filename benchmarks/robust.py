@@ -1,4 +1,4 @@
-"""Time robust capture-the-flag answers (solvers/ctf_robust.py) on the
+"""Time robust capture-the-flag answers (solvers/ctf/robust.py) on the
 fake-out's 45^4 game against the plain query, and against a worst case found
 by sampling each disk and interpolating the value with scipy.
 
@@ -40,9 +40,9 @@ def main() -> None:
 
     from bearcat.scenarios.cast import _CtfGame
     from bearcat.scenarios.schema import load_scenario
-    from bearcat.solvers.ctf import EDGE_SLACK
-    from bearcat.solvers.ctf_queries import interpolate_2d
-    from bearcat.solvers.ctf_robust import RobustCtf
+    from bearcat.solvers.ctf.queries import interpolate_2d
+    from bearcat.solvers.ctf.robust import RobustCtf
+    from bearcat.solvers.ctf.sets import EDGE_SLACK
 
     queries = _CtfGame(load_scenario("fake-out")).solved()
     robust = RobustCtf(queries)

@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from bearcat.scenarios.maneuvers import builtin_dir, load_maneuver, load_or_design, parse_maneuver
-from bearcat.solvers.backflip_flight import fly, fly_many, nominal_flight
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.planar_quad import IMPULSE, Quadrotor, planar
+from bearcat.solvers.maneuvers.backflip_flight import fly, fly_many, nominal_flight
+from bearcat.solvers.maneuvers.planar_quad import IMPULSE, Quadrotor, planar
 
 pytestmark = pytest.mark.xdist_group("backflip")  # the module's fixtures are built once, in one xdist worker
 

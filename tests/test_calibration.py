@@ -99,8 +99,8 @@ def field_game():
     from bearcat.maps import load_map
     from bearcat.maps.ctf import ctf_geometry
     from bearcat.maps.ctf_rules import default_rules
-    from bearcat.solvers.ctf import solve_ctf
-    from bearcat.solvers.ctf_queries import CtfQueries
+    from bearcat.solvers.ctf.queries import CtfQueries
+    from bearcat.solvers.ctf.sets import solve_ctf
 
     game_map = load_map("field-50")
     rules = default_rules(game_map, 3.0, 3.0, capture_radius=2.5, return_time=30.0)
@@ -108,7 +108,7 @@ def field_game():
 
 
 def test_sampled_values_are_the_queries_values(field_game):
-    from bearcat.solvers.ctf_sampled import SampledCtf
+    from bearcat.solvers.ctf.sampled import SampledCtf
 
     rng = np.random.default_rng(7)
     attackers = rng.uniform([5, 5], [45, 40], size=(20, 2))
@@ -120,7 +120,7 @@ def test_sampled_values_are_the_queries_values(field_game):
 
 
 def test_sampled_quantiles_are_numpys(field_game):
-    from bearcat.solvers.ctf_sampled import SampledCtf, _row_quantiles
+    from bearcat.solvers.ctf.sampled import SampledCtf, _row_quantiles
 
     rng = np.random.default_rng(9)
     for n in (1, 2, 7, 64):
@@ -135,7 +135,7 @@ def test_sampled_quantiles_are_numpys(field_game):
 
 
 def test_a_quantile_heading_is_never_worse_than_the_plain_one_at_its_own_quantile(field_game):
-    from bearcat.solvers.ctf_sampled import SampledCtf
+    from bearcat.solvers.ctf.sampled import SampledCtf
 
     sampled = SampledCtf(field_game)
     rng = np.random.default_rng(8)

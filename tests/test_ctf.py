@@ -21,9 +21,9 @@ from bearcat.agents.ground_station import ctf_cache
 from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve
 from bearcat.maps import MapError, load_map
 from bearcat.maps.ctf import ctf_geometry
-from bearcat.solvers.ctf import CtfSolution, Rules, required_game_bytes, solve_ctf
-from bearcat.solvers.ctf_playout import play
-from bearcat.solvers.ctf_queries import CtfQueries, interpolate_2d
+from bearcat.solvers.ctf.playout import play
+from bearcat.solvers.ctf.queries import CtfQueries, interpolate_2d
+from bearcat.solvers.ctf.sets import CtfSolution, Rules, required_game_bytes, solve_ctf
 from bearcat.solvers.errors import InputError
 
 N = 21  # nodes per axis of the ctf-10 games: 0.5 m cells
@@ -340,7 +340,7 @@ def test_region_outlines_are_traced_as_contourpys_own_generator_traces_them():
     values are not finite (masked, as it masks them)."""
     import contourpy
 
-    from bearcat.solvers.ctf_queries import _filled_contours
+    from bearcat.solvers.ctf.queries import _filled_contours
 
     rng = np.random.default_rng(0)
     for trial in range(60):
@@ -633,7 +633,7 @@ import json, sys
 from pathlib import Path
 from bearcat.agents.ground_station.ctf_cache import CtfGame, load_or_solve
 from bearcat.maps import load_map
-from bearcat.solvers.ctf import Rules
+from bearcat.solvers.ctf.sets import Rules
 rules = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.8, capture_time=12.0, return_time=12.0)
 solved = load_or_solve(CtfGame(load_map("ctf-10"), 21, rules, scheme="first"), "both", root=Path(sys.argv[1]))
 print(json.dumps(solved.sources))
@@ -655,8 +655,8 @@ import json, sys
 import numpy as np
 from bearcat.maps import load_map
 from bearcat.maps.ctf import ctf_geometry
-from bearcat.solvers import ctf_queries
-from bearcat.solvers.ctf import CtfSolution, Rules, SetSolution, solve_ctf
+from bearcat.solvers.ctf import queries as ctf_queries
+from bearcat.solvers.ctf.sets import CtfSolution, Rules, SetSolution, solve_ctf
 
 ctf_queries.compile_kernels()  # before any real game, as the launcher's child does
 kernels = ("interpolate_2d", "_value_and_gradient", "_finite_gradient", "_slice")

@@ -1,12 +1,12 @@
 """The local (narrow-band) solve of capture-the-flag games against the full
 grid: flag return, flag capture and the two-stage game on an open field and
-among buildings, set by set (``solvers.hji``, ``local``)."""
+among buildings, set by set (``solvers.levelset.hji``, ``local``)."""
 
 import pytest
 
 from bearcat.maps import load_map
 from bearcat.maps.ctf import ctf_geometry
-from bearcat.solvers.ctf import Rules, solve_ctf
+from bearcat.solvers.ctf.sets import Rules, solve_ctf
 from tests.support.local_band import assert_local_matches_full
 
 GAMES = {

@@ -10,7 +10,7 @@ from scipy.interpolate import RegularGridInterpolator
 
 from bearcat.maps import load_map
 from bearcat.maps.ctf import ctf_geometry
-from bearcat.solvers.ctf import Rules, solve_ctf
+from bearcat.solvers.ctf.sets import Rules, solve_ctf
 
 RULES = Rules(attacker_speed=1.0, defender_speed=1.0, capture_radius=0.5, capture_time=6.0, return_time=6.0)
 

@@ -1,4 +1,4 @@
-"""Robust capture-the-flag answers (solvers/ctf_robust.py) against the
+"""Robust capture-the-flag answers (solvers/ctf/robust.py) against the
 plain queries they are built on: the worst case never misses a state the
 sets allow, a set of one point gives the plain answer, larger sets are
 never better, the bound is tight to a fraction of a cell, and the robust
@@ -16,9 +16,9 @@ from hypothesis import strategies as st
 
 from bearcat.maps import load_map
 from bearcat.maps.ctf import ctf_geometry
-from bearcat.solvers.ctf import EDGE_SLACK, Rules, solve_ctf
-from bearcat.solvers.ctf_queries import CtfQueries, interpolate_2d
-from bearcat.solvers.ctf_robust import RobustCtf
+from bearcat.solvers.ctf.queries import CtfQueries, interpolate_2d
+from bearcat.solvers.ctf.robust import RobustCtf
+from bearcat.solvers.ctf.sets import EDGE_SLACK, Rules, solve_ctf
 from bearcat.solvers.errors import InputError
 
 SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])

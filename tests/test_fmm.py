@@ -8,11 +8,11 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from scipy import ndimage
 
-from bearcat.solvers.descent import descend, descend_steps
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.fmm import point_source, time_to_capture, travel_time
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.interpolation import bilinear
+from bearcat.solvers.marching.descent import descend, descend_steps
+from bearcat.solvers.marching.fmm import point_source, time_to_capture, travel_time
 
 
 def square(n, side=10.0):

@@ -20,8 +20,8 @@ from bearcat.bus.messages import Fix, Guidance
 from bearcat.maps import load_map
 from bearcat.maps.ctf import ctf_geometry
 from bearcat.netem.models import CompassError, GpsError
-from bearcat.solvers.ctf import Rules, solve_ctf
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf.queries import CtfQueries
+from bearcat.solvers.ctf.sets import Rules, solve_ctf
 
 
 def fixes_at(game_map, positions):

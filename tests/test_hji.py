@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
-from bearcat.solvers.hji import PaddedField, required_bytes, solve_reach_avoid
+from bearcat.solvers.levelset import kernels as kern
+from bearcat.solvers.levelset.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
+from bearcat.solvers.levelset.hji import PaddedField, required_bytes, solve_reach_avoid
 from tests.support.local_band import assert_local_matches_full
 
 SCHEMES = ("first", "weno5")

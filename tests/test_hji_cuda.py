@@ -1,4 +1,4 @@
-"""The CUDA backend of the level-set solver (``solvers.hji_cuda``) against
+"""The CUDA backend of the level-set solver (``solvers.levelset.cuda``) against
 the CPU's, and how a solve's device is chosen.
 
 Without a GPU (CI, most machines) the kernels run under numba's CUDA
@@ -30,9 +30,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from bearcat.solvers import devices
-from bearcat.solvers.devices import Gpu, choose_device
 from bearcat.solvers.errors import InputError
+from bearcat.solvers.levelset import devices
+from bearcat.solvers.levelset.devices import Gpu, choose_device
 
 ROOT = Path(__file__).resolve().parents[1]
 HARDWARE = os.environ.get("BEARCAT_CUDA_TESTS") == "hardware"
@@ -167,7 +167,7 @@ def no_gpu_here() -> bool:
 
 def test_auto_takes_a_gpu_when_numba_cuda_finds_one_and_says_which(monkeypatch, caplog):
     monkeypatch.setattr(devices, "find_gpu", lambda: Gpu("NVIDIA H200"))
-    with caplog.at_level(logging.INFO, logger="bearcat.solvers.devices"):
+    with caplog.at_level(logging.INFO, logger="bearcat.solvers.levelset.devices"):
         chosen = choose_device("auto")
     assert chosen.kind == "cuda" and str(chosen) == "the GPU NVIDIA H200"
     assert "NVIDIA H200" in caplog.text
@@ -180,7 +180,7 @@ def test_auto_takes_a_gpu_when_numba_cuda_finds_one_and_says_which(monkeypatch, 
 
 def test_auto_takes_the_cpu_without_a_gpu_and_says_why(monkeypatch, caplog):
     monkeypatch.setattr(devices, "find_gpu", lambda: "numba-cuda finds no CUDA GPU or driver")
-    with caplog.at_level(logging.INFO, logger="bearcat.solvers.devices"):
+    with caplog.at_level(logging.INFO, logger="bearcat.solvers.levelset.devices"):
         chosen = choose_device("auto")
     assert chosen.kind == "cpu" and "finds no CUDA GPU" in caplog.text and "CPU" in caplog.text
     with pytest.raises(InputError, match=r"^device 'cuda' needs a CUDA GPU, but numba-cuda finds no CUDA GPU"):
@@ -191,7 +191,7 @@ def test_auto_takes_the_cpu_without_a_gpu_and_says_why(monkeypatch, caplog):
 
 def tiny_problem():
     from bearcat.solvers.grid import Grid
-    from bearcat.solvers.hamiltonians import Player, SimpleMotion
+    from bearcat.solvers.levelset.hamiltonians import Player, SimpleMotion
 
     grid = Grid.spanning((-1.0, -1.0), (1.0, 1.0), (11, 11))
     x, y = grid.mesh()
@@ -199,7 +199,7 @@ def tiny_problem():
 
 
 def test_the_narrow_band_runs_on_the_cpu(monkeypatch):
-    from bearcat.solvers.hji import solve_reach_avoid
+    from bearcat.solvers.levelset.hji import solve_reach_avoid
 
     monkeypatch.setattr(devices, "find_gpu", lambda: Gpu("NVIDIA H200"))
     grid, game, target = tiny_problem()
@@ -214,9 +214,9 @@ def test_the_narrow_band_runs_on_the_cpu(monkeypatch):
 
 @needs_numba_cuda
 def test_problems_beyond_the_kernels_sizes_are_named():
-    from bearcat.solvers import hji_cuda
     from bearcat.solvers.grid import Grid
-    from bearcat.solvers.hamiltonians import Player, SimpleMotion, lower
+    from bearcat.solvers.levelset import cuda as hji_cuda
+    from bearcat.solvers.levelset.hamiltonians import Player, SimpleMotion, lower
 
     grid = Grid.spanning((0.0,) * 9, (1.0,) * 9, (2,) * 9)
     args = lower(SimpleMotion((Player(tuple(range(9)), 1.0),)), grid, np.float32).args
@@ -261,7 +261,7 @@ def test_the_cache_key_says_nothing_of_the_device():
     from bearcat.maps import load_map
     from bearcat.scenarios.cast import ctf_of
     from bearcat.scenarios.schema import parse_scenario
-    from bearcat.solvers.ctf import Rules
+    from bearcat.solvers.ctf.sets import Rules
     from tests.support.scenario_files import scenario_text
 
     arena = load_map("ctf-10")
@@ -279,7 +279,7 @@ def test_the_shared_functions_are_those_the_cached_kernels_were_checked_against(
     numba's cache of the kernels does not see: when this fails, check the
     kernels against the change and set ``hji_cuda.SHARED_SOURCE`` to the
     new hash (which, changing that file, retires the cached kernels)."""
-    script = "from bearcat.solvers import hji_cuda as h; print(h.shared_source(), h.SHARED_SOURCE)"
+    script = "from bearcat.solvers.levelset import cuda as h; print(h.shared_source(), h.SHARED_SOURCE)"
     env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1", PYTHONPATH=str(ROOT))
     done = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, check=True)
     now, recorded = done.stdout.split()

@@ -7,8 +7,8 @@ import numba
 import numpy as np
 
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import Box, ControlAffine
-from bearcat.solvers.maneuver import Mode, avoid_set, box, capture_sequence, capture_set, contained, forward_reach
+from bearcat.solvers.levelset.hamiltonians import Box, ControlAffine
+from bearcat.solvers.maneuvers.sets import Mode, avoid_set, box, capture_sequence, capture_set, contained, forward_reach
 
 
 @numba.njit(cache=True)

@@ -13,7 +13,7 @@ from shapely.geometry import Point, box
 
 from bearcat.agents.navigation import LOOK_AHEAD, Navigator, navigator
 from bearcat.maps import Map
-from bearcat.solvers.descent import aim_ahead, descend
+from bearcat.solvers.marching.descent import aim_ahead, descend
 
 
 def walled_map() -> Map:
@@ -81,7 +81,7 @@ import numpy as np
 from shapely.geometry import box
 from bearcat.maps import load_map
 from bearcat.agents.navigation import Navigator, navigator
-from bearcat.solvers import descent
+from bearcat.solvers.marching import descent
 
 descent.compile_kernels()  # before any game, as the launcher's child does
 counts = lambda: len(descent._aim.signatures)  # what it calls is compiled into it

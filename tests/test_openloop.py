@@ -7,10 +7,10 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from bearcat.solvers import fmm
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.openloop import Defender, solve_openloop
+from bearcat.solvers.marching import fmm
+from bearcat.solvers.marching.openloop import Defender, solve_openloop
 
 
 def open_square(side=40.0, h=0.25):

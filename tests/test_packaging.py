@@ -20,7 +20,7 @@ import pytest
 ROOT = Path(__file__).resolve().parent.parent
 PACKAGE = ROOT / "bearcat"
 DATA = (("*.geojson", "maps/data"), ("*.toml", "scenarios/data"), ("profiles.toml", "netem"))
-QUERY = "from bearcat.solvers.ctf import solve_ctf"
+QUERY = "from bearcat.solvers.ctf.sets import solve_ctf"
 
 
 def copy_of_the_sources(into: Path) -> Path:
@@ -119,7 +119,7 @@ def test_installs_of_either_kind_in_either_order_import_from_anywhere(tmp_path):
     """``pip install .``, then ``pip install -e .``, then ``pip install .``
     again, as a user trying both would; between them the numba cache that a
     run writes beside the installed solvers (``cache=True``), which pip's
-    uninstall leaves behind. After each, ``bearcat.solvers.ctf`` imports from
+    uninstall leaves behind. After each, ``bearcat.solvers.ctf.sets`` imports from
     the install just made, and an editor finds it there too."""
     source = copy_of_the_sources(tmp_path)
     venv = Venv(tmp_path / "venv")
@@ -128,20 +128,20 @@ def test_installs_of_either_kind_in_either_order_import_from_anywhere(tmp_path):
     installed = venv.site / "bearcat" / "solvers" / "ctf.py"
 
     pip(venv.python, "install", "--no-deps", str(source))
-    assert venv.where("bearcat.solvers.ctf", elsewhere) == installed
+    assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == installed
     numba_cache = installed.parent / "__pycache__" / "ctf.solve-1.py311.nbi"
     numba_cache.parent.mkdir(exist_ok=True)
     numba_cache.write_bytes(b"index")
 
     pip(venv.python, "install", "--no-deps", "-e", str(source))
     assert numba_cache.exists()  # what made the checkout's package a namespace package before
-    assert venv.where("bearcat.solvers.ctf", elsewhere) == source / "bearcat" / "solvers" / "ctf.py"
+    assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == source / "bearcat" / "solvers" / "ctf.py"
     assert venv.where("bearcat", elsewhere) == source / "bearcat" / "__init__.py"
     script = elsewhere / "scratch.py"
     assert definition(QUERY, script, elsewhere, venv.python) == source / "bearcat" / "solvers" / "ctf.py"
 
     pip(venv.python, "install", "--no-deps", str(source))
-    assert venv.where("bearcat.solvers.ctf", elsewhere) == installed
+    assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == installed
     assert definition(QUERY, script, elsewhere, venv.python) == installed
 
 

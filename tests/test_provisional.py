@@ -15,7 +15,7 @@ from bearcat.netem.profiles import load_profile
 from bearcat.runtime.solve_ahead import SolveBehind
 from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf.queries import CtfQueries
 from tests.test_guidance import fixes_at
 
 GAME = """

@@ -15,7 +15,7 @@ from shapely.geometry import LineString, Point, Polygon
 from shapely.geometry.polygon import orient
 
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.pursuit import (
+from bearcat.solvers.pursuit.convex import (
     ConvexAreaPursuit,
     ConvexFarthestPointEvader,
     StraightPursuit,

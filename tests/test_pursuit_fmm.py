@@ -9,7 +9,7 @@ from shapely.geometry import LineString, Polygon, box
 
 from bearcat.maps import load_map, rasterize
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.pursuit_fmm import (
+from bearcat.solvers.pursuit.fmm import (
     FarthestPointEvader,
     FmmAreaPursuit,
     GeodesicPursuit,

@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.pursuit_game import first_contact, pursue
+from bearcat.solvers.pursuit.game import first_contact, pursue
 
 
 def test_agents_that_pass_through_each_other_within_one_step_are_caught():

@@ -19,8 +19,8 @@ from shapely.geometry.base import BaseGeometry
 
 from bearcat.maps import Map, rasterize
 from bearcat.maps.raster import covered
-from bearcat.solvers import fmm
-from bearcat.solvers.descent import aim_ahead
+from bearcat.solvers.marching import fmm
+from bearcat.solvers.marching.descent import aim_ahead
 
 LOOK_AHEAD = 2.0  # metres along the path the returned direction aims at
 

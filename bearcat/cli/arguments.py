@@ -156,9 +156,9 @@ def add_batch_options(parser: argparse.ArgumentParser, what: str) -> None:
 
 
 def add_device_option(parser) -> None:
-    """``--device``, where a level-set solve runs (``solvers.devices``), for
+    """``--device``, where a level-set solve runs (``solvers.levelset.devices``), for
     every command that may solve one."""
-    from bearcat.solvers.devices import DEVICES
+    from bearcat.solvers.levelset.devices import DEVICES
 
     parser.add_argument(
         "--device",

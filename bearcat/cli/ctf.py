@@ -22,10 +22,10 @@ from bearcat.maps import load_map
 from bearcat.maps.ctf_rules import default_rules, unresolved_capture
 from bearcat.maps.geodesy import bearing
 from bearcat.scenarios.schema import UNCERTAINTIES
-from bearcat.solvers.ctf import DEFAULT_TOL, SET_NAMES, STAGES
-from bearcat.solvers.ctf_playout import play
-from bearcat.solvers.ctf_queries import CtfQueries, StateReport
-from bearcat.solvers.hji import SCHEMES
+from bearcat.solvers.ctf.playout import play
+from bearcat.solvers.ctf.queries import CtfQueries, StateReport
+from bearcat.solvers.ctf.sets import DEFAULT_TOL, SET_NAMES, STAGES
+from bearcat.solvers.levelset.hji import SCHEMES
 
 DEFAULT_GRID = 45
 
@@ -417,7 +417,7 @@ def run_query(args) -> int:
 def robust_answers(args, game: CtfGame, guidance: CtfQueries, phase: str) -> dict:
     """Both displays' robust answers and regions for the fixes the options describe."""
     from bearcat.agents.ground_station.guidance.fixes import Uncertainty
-    from bearcat.solvers.ctf_robust import RobustCtf
+    from bearcat.solvers.ctf.robust import RobustCtf
 
     rules = game.rules
     uncertainty = Uncertainty({"attacker": rules.attacker_speed, "defender": rules.defender_speed}, args.confidence)

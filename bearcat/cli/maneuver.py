@@ -21,10 +21,10 @@ from bearcat.cli.output import Output, add_json_option
 from bearcat.cli.progress import counting, solve_bars
 from bearcat.cli.writing import writing
 from bearcat.scenarios.maneuvers import Maneuver, list_maneuvers, load_maneuver, load_or_design, with_torque_share
-from bearcat.solvers.backflip import BackflipSets
-from bearcat.solvers.backflip_flight import Trials, fly_many, nominal_flight
-from bearcat.solvers.hji import SCHEMES
-from bearcat.solvers.planar_quad import DRIFT, IMPULSE, RECOVERY
+from bearcat.solvers.levelset.hji import SCHEMES
+from bearcat.solvers.maneuvers.backflip import BackflipSets
+from bearcat.solvers.maneuvers.backflip_flight import Trials, fly_many, nominal_flight
+from bearcat.solvers.maneuvers.planar_quad import DRIFT, IMPULSE, RECOVERY
 from bearcat.studies.thesis import wilson
 
 SET_LABELS = {

@@ -32,7 +32,7 @@ def solve_bars(
     closes when the next set starts or at its horizon; ``progress.close()``
     closes the bar of a set that converged before its horizon."""
     if label is None:
-        from bearcat.solvers.ctf import SET_NAMES
+        from bearcat.solvers.ctf.sets import SET_NAMES
 
         def label(name: str) -> str:
             return f"solving {SET_NAMES[name]} ({name} set)"

@@ -17,7 +17,7 @@ import numpy as np
 from bearcat.cli import arguments
 from bearcat.cli.output import Output, add_json_option
 from bearcat.maps import Map, MapError, Raster, load_map, rasterize
-from bearcat.solvers.openloop import Defender, OpenLoopSolution, solve_openloop
+from bearcat.solvers.marching.openloop import Defender, OpenLoopSolution, solve_openloop
 
 #: Default grid: this many cells along the longer side of the map, so a
 #: 10 m maze and a 400 m campus both get a useful resolution.

@@ -15,7 +15,7 @@ import numpy as np
 
 from bearcat.maps import Map, Raster
 from bearcat.maps.plot import draw_map
-from bearcat.solvers.openloop import OpenLoopSolution
+from bearcat.solvers.marching.openloop import OpenLoopSolution
 
 STAGE_COLOURS = ("tab:red", "tab:purple", "tab:orange", "tab:brown", "tab:pink")
 

@@ -15,8 +15,8 @@ import numpy as np
 from matplotlib.artist import Artist
 from matplotlib.patches import Patch, Rectangle
 
-from bearcat.solvers.backflip import BackflipSets, TargetBox
-from bearcat.solvers.backflip_flight import Flight
+from bearcat.solvers.maneuvers.backflip import BackflipSets, TargetBox
+from bearcat.solvers.maneuvers.backflip_flight import Flight
 
 DEG = 180 / np.pi
 MODE_COLOURS = {"impulse": "tab:red", "drift": "tab:blue", "recovery": "tab:green"}

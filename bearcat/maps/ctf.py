@@ -11,7 +11,7 @@ from bearcat.maps.distance import signed_distance
 from bearcat.maps.errors import MapError
 from bearcat.maps.model import Map
 from bearcat.maps.raster import rasterize
-from bearcat.solvers.ctf import CtfGeometry
+from bearcat.solvers.ctf.sets import CtfGeometry
 from bearcat.solvers.grid import Grid
 
 MIN_GRID_POINTS = 9

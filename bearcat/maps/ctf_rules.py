@@ -7,7 +7,7 @@ from __future__ import annotations
 import math
 
 from bearcat.maps.model import Map
-from bearcat.solvers.ctf import Rules
+from bearcat.solvers.ctf.sets import Rules
 
 
 def default_rules(

@@ -54,7 +54,7 @@ from bearcat.runtime.peer_spec import PeerSpec
 from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, skewed
 from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
 from bearcat.scenarios.schema import ScenarioError
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf.queries import CtfQueries
 
 log = logging.getLogger(__name__)
 

@@ -85,7 +85,7 @@ class SolveBehind:
         """Wait for the sets, reporting the game time solved to ``progress``
         and telling ``say`` why; Ctrl-C stops the solve instead. Whether they
         were solved."""
-        from bearcat.solvers.ctf import STAGES
+        from bearcat.solvers.ctf.sets import STAGES
 
         if not self.done:
             grid = self.awaited.game.grid_points
@@ -113,7 +113,7 @@ class SolveBehind:
 
 def compile_kernels_behind():
     """A child process, on otherwise idle processors, that fills numba's
-    cache with the guidance's query kernels (``ctf_queries.compile_kernels``)
+    cache with the guidance's query kernels (``ctf.queries.compile_kernels``)
     and the walkers' look-ahead (``descent.compile_kernels``) while the
     launcher compiles and runs the solver on one processor. So a ground
     station peer of a fresh clone loads its kernels in a third of a second
@@ -128,7 +128,8 @@ def compile_kernels_behind():
 
 def _compile_kernels() -> None:
     _idle()
-    from bearcat.solvers import ctf_queries, descent
+    from bearcat.solvers.ctf import queries as ctf_queries
+    from bearcat.solvers.marching import descent
 
     ctf_queries.compile_kernels()
     descent.compile_kernels()
@@ -174,7 +175,7 @@ def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
     if where[WAITED]:  # the launcher started waiting, and promoting us, before we made ourselves idle
         _promote()
     from bearcat.agents.ground_station.ctf_cache import load_or_solve
-    from bearcat.solvers.ctf import STAGES
+    from bearcat.solvers.ctf.sets import STAGES
 
     game = pickle.loads(pickled_game)
     names = STAGES[stages]

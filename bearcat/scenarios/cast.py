@@ -47,7 +47,7 @@ from bearcat.agents.uav.autopilot import SimulatedAutopilot
 from bearcat.maps.ctf_rules import default_rules, provisional_grid, unresolved_capture
 from bearcat.netem.profiles import Profile
 from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf.queries import CtfQueries
 
 log = logging.getLogger(__name__)
 TASKER = "uav-tasking"  # the name the ground station's UAV tasking goes by in logs and streams

@@ -27,12 +27,12 @@ from msgspec import Meta
 
 from bearcat.agents.cache import cache_root, write_atomically
 from bearcat.agents.ground_station.ctf_cache import solver_fingerprint
-from bearcat.solvers.backflip import Backflip, BackflipSets, SetProgress, TargetBox, design
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hji import ReachAvoidResult
-from bearcat.solvers.maneuver import Containment
-from bearcat.solvers.planar_quad import Laws, Quadrotor
+from bearcat.solvers.levelset.hji import ReachAvoidResult
+from bearcat.solvers.maneuvers.backflip import Backflip, BackflipSets, SetProgress, TargetBox, design
+from bearcat.solvers.maneuvers.planar_quad import Laws, Quadrotor
+from bearcat.solvers.maneuvers.sets import Containment
 from bearcat.validation import Invalid, convert
 
 log = logging.getLogger(__name__)

@@ -73,7 +73,7 @@ from bearcat.maps import Map, MapError, load_map
 from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
 from bearcat.scenarios.faults import Fault, check_faults
-from bearcat.solvers.devices import DEVICES
+from bearcat.solvers.levelset.devices import DEVICES
 from bearcat.validation import Invalid, convert, not_one_of
 
 Game = Literal["ctf", "reach-avoid", "pursuit"]
@@ -88,7 +88,7 @@ MAX_CELLS = 2000
 
 if TYPE_CHECKING:
     ProfileName = str  # read from the profiles file: checked when a scenario is read
-    Device = str  # where sets are solved: one of solvers.devices.DEVICES
+    Device = str  # where sets are solved: one of solvers.levelset.devices.DEVICES
 else:
     ProfileName = Literal[tuple(load_profiles())]
     Device = Literal[DEVICES]
@@ -213,7 +213,7 @@ class CtfRules(_Table, frozen=True):
     capture_time: Horizon | None = None
     return_time: Horizon | None = None
     visibility: Literal["full", "line-of-sight"] = "full"
-    # Where the sets are solved (solvers.devices): "auto" takes a GPU when
+    # Where the sets are solved (solvers.levelset.devices): "auto" takes a GPU when
     # numba-cuda finds one; the sets, and their cache entries, are the same.
     device: Device = "auto"
 

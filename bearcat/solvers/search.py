@@ -48,9 +48,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers import fmm
 from bearcat.solvers.errors import InputError, non_negative, positive
 from bearcat.solvers.grid import Grid
+from bearcat.solvers.marching import fmm
 
 __all__ = [
     "PossibleDefender",

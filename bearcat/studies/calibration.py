@@ -29,7 +29,7 @@ from bearcat.bus.messages import Fix
 from bearcat.netem.profiles import Profile
 from bearcat.scenarios.cast import ctf_of, tracking
 from bearcat.scenarios.schema import Scenario
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf.queries import CtfQueries
 from bearcat.solvers.errors import InputError
 
 CALIBRATION_SEED = 100_000

@@ -31,10 +31,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from bearcat.maps import load_map, rasterize
-from bearcat.solvers.pursuit_game import pursue
+from bearcat.solvers.pursuit.game import pursue
 
 if TYPE_CHECKING:
-    from bearcat.solvers.pursuit_fmm import TravelTimes
+    from bearcat.solvers.pursuit.fmm import TravelTimes
 
 THESIS_TABLE = {
     "square-10": (91.6, 98.2, 96.6),
@@ -205,10 +205,10 @@ class _Domain:
 
     def strategy(self, name: str, travel_times):
         if self.kind == "convex":
-            from bearcat.solvers.pursuit import ConvexAreaPursuit, StraightPursuit
+            from bearcat.solvers.pursuit.convex import ConvexAreaPursuit, StraightPursuit
 
             return ConvexAreaPursuit(self.polygon) if name == "area" else StraightPursuit()
-        from bearcat.solvers.pursuit_fmm import FmmAreaPursuit, GeodesicPursuit
+        from bearcat.solvers.pursuit.fmm import FmmAreaPursuit, GeodesicPursuit
 
         if name == "area":
             return FmmAreaPursuit(
@@ -222,10 +222,10 @@ class _Domain:
 
     def evader(self, travel_times):
         if self.kind == "convex":
-            from bearcat.solvers.pursuit import ConvexFarthestPointEvader
+            from bearcat.solvers.pursuit.convex import ConvexFarthestPointEvader
 
             return ConvexFarthestPointEvader(self.polygon, self.capture_radius)
-        from bearcat.solvers.pursuit_fmm import FarthestPointEvader
+        from bearcat.solvers.pursuit.fmm import FarthestPointEvader
 
         return FarthestPointEvader(
             travel_times, evader_speed=self.speed, pursuer_speeds=self.speed, capture_radius=self.capture_radius
@@ -235,7 +235,7 @@ class _Domain:
         """Travel times over a non-convex domain (None for a convex one, whose strategies are analytic)."""
         if self.kind == "convex":
             return None
-        from bearcat.solvers.pursuit_fmm import TravelTimes
+        from bearcat.solvers.pursuit.fmm import TravelTimes
 
         return TravelTimes(self.grid, self.raster_speed)
 

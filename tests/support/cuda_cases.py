@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
+from bearcat.solvers.levelset.hamiltonians import Ball, Box, ControlAffine, Player, SimpleMotion
 
 
 @numba.njit(cache=True)
@@ -109,7 +109,7 @@ CASES = {
 
 
 def solve(case: str, scheme: str, options: dict) -> tuple[dict, dict]:
-    from bearcat.solvers.hji import solve_reach_avoid
+    from bearcat.solvers.levelset.hji import solve_reach_avoid
 
     grid, game, target, avoid = CASES[case]()
     settings = {"horizon": 0.5, "record_tstar": True, "tol": 0.0} | options
@@ -134,7 +134,7 @@ def solve(case: str, scheme: str, options: dict) -> tuple[dict, dict]:
 
 def solve_game(scheme: str, options: dict) -> tuple[dict, dict]:
     """The two-stage capture-the-flag game (R_A, then W_A) on a 6-point arena."""
-    from bearcat.solvers.ctf import CtfGeometry, Rules, solve_ctf
+    from bearcat.solvers.ctf.sets import CtfGeometry, Rules, solve_ctf
 
     grid = Grid.spanning((0.0, 0.0), (10.0, 10.0), (6, 6))
     x, y = grid.mesh()

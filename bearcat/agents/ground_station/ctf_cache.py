@@ -51,7 +51,7 @@ from bearcat.agents.cache import cache_root, write_atomically
 from bearcat.maps import Map
 from bearcat.maps.ctf import ctf_geometry
 from bearcat.maps.geojson import dumps
-from bearcat.solvers.ctf import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
+from bearcat.solvers.ctf.sets import DEFAULT_TOL, STAGES, CtfSolution, ProgressCallback, Rules, SetSolution, solve_ctf
 from bearcat.solvers.errors import InputError
 
 log = logging.getLogger(__name__)

@@ -36,7 +36,7 @@ from bearcat.agents.protocol import Send
 from bearcat.bus import keys
 from bearcat.bus.messages import Control, Fix, GameState, Message, Phase, Truth
 from bearcat.maps import Map
-from bearcat.solvers.pursuit_game import first_contact
+from bearcat.solvers.pursuit.game import first_contact
 
 STATE_EVERY = 1.0  # s between state messages when nothing changes
 

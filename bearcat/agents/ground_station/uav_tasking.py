@@ -37,7 +37,7 @@ from bearcat.bus.messages import Detection, Fix, GameState, Message, UavTask
 from bearcat.maps import Map
 from bearcat.maps.raster import rasterize
 from bearcat.solvers import search
-from bearcat.solvers.ctf_queries import CtfQueries
+from bearcat.solvers.ctf.queries import CtfQueries
 from bearcat.solvers.errors import InputError
 
 PERIOD = 1.0  # s between updates and tasks

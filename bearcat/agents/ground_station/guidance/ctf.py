@@ -7,7 +7,7 @@ Each agent's guidance treats the stale, noisy fixes in one of three ways
 
 - ``none``: the fixes are taken as exact, as in the thesis.
 - ``worst-case``: each player is anywhere in the disk its last fix allows
-  (``solvers.ctf_robust``), go and "winning" hold against all of it, the
+  (``solvers.ctf.robust``), go and "winning" hold against all of it, the
   region is the opponent's region against the worst of it, and
   ``uncertain`` says that the plain answer at the fixes would have said
   otherwise.
@@ -19,7 +19,7 @@ Each agent's guidance treats the stale, noisy fixes in one of three ways
   tracker's own, the ``1 - alpha`` quantile of the value over its belief,
   and the note says so. The defender's heading is the one whose step leaves
   a quantile of the value over samples of the belief best
-  (``solvers.ctf_sampled``), and its value is that quantile.
+  (``solvers.ctf.sampled``), and its value is that quantile.
   ``ablate`` (``guidance.ablate``) switches parts off for a study: with
   ``calibration`` the margin is the tracker's own, with ``belief`` the
   defender steers by the plain heading at the prediction.
@@ -39,9 +39,9 @@ from bearcat.agents.ground_station.tracker import Belief
 from bearcat.bus.messages import GameState
 from bearcat.maps import Map
 from bearcat.maps.geodesy import bearing
-from bearcat.solvers.ctf_queries import CtfQueries
-from bearcat.solvers.ctf_robust import RobustCtf
-from bearcat.solvers.ctf_sampled import SampledCtf
+from bearcat.solvers.ctf.queries import CtfQueries
+from bearcat.solvers.ctf.robust import RobustCtf
+from bearcat.solvers.ctf.sampled import SampledCtf
 from bearcat.solvers.errors import InputError
 
 RADIUS_STEP = 0.25

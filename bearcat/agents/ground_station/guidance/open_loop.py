@@ -110,7 +110,7 @@ class ReachAvoidAdvisor:
         return fields
 
     def _solve(self, a, others, grown):
-        from bearcat.solvers.openloop import Defender, solve_openloop
+        from bearcat.solvers.marching.openloop import Defender, solve_openloop
 
         defenders = [
             Defender(tuple(p), self.speed[d], self.capture_radius + r) for d, p, r in zip(self.defenders, others, grown)

@@ -21,7 +21,7 @@ class PursuitAdvisor:
     metres."""
 
     def __init__(self, game_map: Map, *, evader: str, pursuers) -> None:
-        from bearcat.solvers.pursuit import area_minimising_headings, line_of_control, voronoi_cell
+        from bearcat.solvers.pursuit.convex import area_minimising_headings, line_of_control, voronoi_cell
 
         self.map = game_map
         self.evader, self.pursuers = evader, tuple(pursuers)

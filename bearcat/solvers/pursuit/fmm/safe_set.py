@@ -9,9 +9,9 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers import fmm
 from bearcat.solvers.errors import InputError, non_negative, positive
-from bearcat.solvers.pursuit_fmm.travel_times import TravelTimes
+from bearcat.solvers.marching import fmm
+from bearcat.solvers.pursuit.fmm.travel_times import TravelTimes
 
 __all__ = ["SafeSet", "check_pursuer_speeds", "march_safe_set", "safe_set"]
 

@@ -38,7 +38,7 @@ import numba
 import numpy as np
 import shapely
 
-from bearcat.solvers.ctf import EDGE_SLACK, CtfGeometry, CtfSolution, Rules, SetSolution
+from bearcat.solvers.ctf.sets import EDGE_SLACK, CtfGeometry, CtfSolution, Rules, SetSolution
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
 

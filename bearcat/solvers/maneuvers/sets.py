@@ -4,7 +4,7 @@ A maneuver is a sequence of modes. Each mode has its dynamics: a fixed
 feedback law folded into ``f0``, or a controlled input in a box, and
 bounded disturbances (eq. 6.4). Each mode also has a target set, where it
 hands over to the next mode. Three kinds of set come out of the HJI solver
-of ``solvers.hji``:
+of ``solvers.levelset.hji``:
 
 - the capture set ``RA_T(T_k)`` (6.1.2, attainability): the states from
   which the mode reaches its target within ``T`` whatever the disturbance
@@ -24,7 +24,7 @@ or where it can drift to while it hands over, must lie inside the next
 mode's capture set. ``contained`` says whether one set lies inside
 another, and by how much it does not.
 
-Values follow ``solvers.hji``: ``<= 0`` inside, and in the units of the
+Values follow ``solvers.levelset.hji``: ``<= 0`` inside, and in the units of the
 target's function. Give signed distances (``box``) and the margins come
 out in state units.
 """
@@ -39,8 +39,8 @@ import numpy as np
 
 from bearcat.solvers.errors import InputError
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import Box, ControlAffine
-from bearcat.solvers.hji import ReachAvoidResult, solve_reach_avoid
+from bearcat.solvers.levelset.hamiltonians import Box, ControlAffine
+from bearcat.solvers.levelset.hji import ReachAvoidResult, solve_reach_avoid
 
 __all__ = [
     "Containment",

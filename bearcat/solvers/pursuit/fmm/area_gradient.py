@@ -57,10 +57,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers import fmm
-from bearcat.solvers.pursuit_fmm.rays import sees
-from bearcat.solvers.pursuit_fmm.safe_set import SafeSet, check_pursuer_speeds, march_safe_set
-from bearcat.solvers.pursuit_fmm.travel_times import TravelTimes
+from bearcat.solvers.marching import fmm
+from bearcat.solvers.pursuit.fmm.rays import sees
+from bearcat.solvers.pursuit.fmm.safe_set import SafeSet, check_pursuer_speeds, march_safe_set
+from bearcat.solvers.pursuit.fmm.travel_times import TravelTimes
 
 __all__ = ["METHODS", "AreaGradient", "area_gradient"]
 

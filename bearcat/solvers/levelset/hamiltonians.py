@@ -1,4 +1,4 @@
-"""Hamiltonians for the level-set solver of ``solvers.hji``.
+"""Hamiltonians for the level-set solver of ``solvers.levelset.hji``.
 
 The control (the attacker of thesis ch. 3) minimises, the disturbance (the
 defender) maximises: ``H(x, p) = min_u max_d p . f(x, u, d)`` (thesis
@@ -35,9 +35,9 @@ import numba
 import numpy as np
 from numba.core.types.function_type import CompileResultWAP
 
-from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError, non_negative
 from bearcat.solvers.grid import Grid
+from bearcat.solvers.levelset import kernels as kern
 
 __all__ = ["DYNAMICS_SIGNATURE", "Ball", "Box", "ControlAffine", "Player", "SimpleMotion"]
 

@@ -1,7 +1,7 @@
 """Capture-the-flag answers over a belief: the value at many joint states at
 once, a quantile of it, and the heading whose step leaves that quantile best.
 
-Where ``ctf_robust`` answers for the worst of a disk round each fix, this
+Where ``ctf.robust`` answers for the worst of a disk round each fix, this
 module answers for samples of where the players are believed to be (a
 tracker's mixture, ``agents.ground_station.tracker``): the defender acts on
 a low quantile of the value over them, the share of the belief it accepts
@@ -12,7 +12,7 @@ Each sample is a joint state: attacker sample ``i`` with defender sample
 ``i``. A heading is scored by stepping the mover's samples all by the same
 vector (the player moves, the belief moves with it) and taking the
 quantile of the value over the stepped states; the opponent stays where it
-is believed to be, as in ``ctf_robust``'s heading search.
+is believed to be, as in ``ctf.robust``'s heading search.
 """
 
 from __future__ import annotations
@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers.ctf import EDGE_SLACK
-from bearcat.solvers.ctf_queries import CtfQueries, interpolate_2d
+from bearcat.solvers.ctf.queries import CtfQueries, interpolate_2d
+from bearcat.solvers.ctf.sets import EDGE_SLACK
 from bearcat.solvers.errors import InputError
 
 __all__ = ["SampledAnswer", "SampledCtf"]

@@ -3,7 +3,7 @@
 The evader's safe-reachable set ``S_e`` holds the nodes it reaches strictly
 before any pursuer could capture it there, along a path of such nodes: the
 modified fast marching method of thesis 4.1.3 and 4.1.5, run with
-``solvers.fmm``. Pursuers that bound part of ``S_e`` (an *active boundary*)
+``solvers.marching.fmm``. Pursuers that bound part of ``S_e`` (an *active boundary*)
 move to shrink its area ``A``; the others close in along the geodesic (pure
 pursuit that goes around obstacles).
 
@@ -21,10 +21,10 @@ pursuit that goes around obstacles).
   farthest-point evader.
 """
 
-from bearcat.solvers.pursuit_fmm.area_gradient import AreaGradient
-from bearcat.solvers.pursuit_fmm.safe_set import SafeSet, safe_set
-from bearcat.solvers.pursuit_fmm.strategies import FarthestPointEvader, FmmAreaPursuit, GeodesicPursuit
-from bearcat.solvers.pursuit_fmm.travel_times import TravelTimes
+from bearcat.solvers.pursuit.fmm.area_gradient import AreaGradient
+from bearcat.solvers.pursuit.fmm.safe_set import SafeSet, safe_set
+from bearcat.solvers.pursuit.fmm.strategies import FarthestPointEvader, FmmAreaPursuit, GeodesicPursuit
+from bearcat.solvers.pursuit.fmm.travel_times import TravelTimes
 
 __all__ = [
     "AreaGradient",

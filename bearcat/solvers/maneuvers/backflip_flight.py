@@ -31,9 +31,18 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers.backflip import BackflipSets
 from bearcat.solvers.errors import InputError
-from bearcat.solvers.planar_quad import CLIMB, DRIFT, IMPULSE, RECOVERY, TWO_PI, planar, thrust_acceleration, thrusts
+from bearcat.solvers.maneuvers.backflip import BackflipSets
+from bearcat.solvers.maneuvers.planar_quad import (
+    CLIMB,
+    DRIFT,
+    IMPULSE,
+    RECOVERY,
+    TWO_PI,
+    planar,
+    thrust_acceleration,
+    thrusts,
+)
 
 __all__ = ["Flight", "Trials", "fly", "fly_many", "nominal_flight"]
 

@@ -13,9 +13,9 @@ import math
 import numba
 import numpy as np
 
-from bearcat.solvers.descent import descend_steps
-from bearcat.solvers.pursuit_fmm.rays import sees
-from bearcat.solvers.pursuit_fmm.travel_times import Front, TravelTimes
+from bearcat.solvers.marching.descent import descend_steps
+from bearcat.solvers.pursuit.fmm.rays import sees
+from bearcat.solvers.pursuit.fmm.travel_times import Front, TravelTimes
 
 __all__ = ["away", "slide", "toward"]
 

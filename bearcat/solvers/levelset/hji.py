@@ -24,16 +24,16 @@ drawn from them, stay meaningful. The reach-avoid set over the horizon is
 Numerics: WENO5 one-sided derivatives with third-order TVD Runge-Kutta
 (``scheme="weno5"``) or first-order upwind differences with forward Euler
 (``scheme="first"``), a Lax-Friedrichs numerical Hamiltonian (see
-``solvers.hamiltonians``), and a fixed step ``dt = cfl / max_x sum_k
+``solvers.levelset.hamiltonians``), and a fixed step ``dt = cfl / max_x sum_k
 alpha_k(x) / dx_k``: the dissipation bounds depend on the state only, so the
 step is found once. The schemes are hj_reachability's
 ``SolverSettings.with_accuracy("very_high")`` and ``("low")``. They run on
-the CPU's cores (``hji_kernels``) or on a CUDA GPU (``hji_cuda``), as
-``device`` says (``solvers.devices``).
+the CPU's cores (``levelset.kernels``) or on a CUDA GPU (``levelset.cuda``), as
+``device`` says (``solvers.levelset.devices``).
 
 Grid edges are the edges of the state space, where nobody gains by leaving.
 Values beyond an edge are extrapolated linearly with the edge slope's
-magnitude (``hji_kernels._beyond``): rising beyond the edges of the axes the
+magnitude (``levelset.kernels._beyond``): rising beyond the edges of the axes the
 control moves along, so leaving never helps it reach the target, and, for
 simple motion, falling beyond the disturbance's axes, so leaving never helps
 it either; these are the rules of thesis 3.3.1 (an attacker that leaves the
@@ -67,15 +67,15 @@ import numba
 import numpy as np
 from scipy import ndimage
 
-from bearcat.solvers import devices
-from bearcat.solvers import hji_kernels as kern
-from bearcat.solvers.devices import DEVICES, Device, choose_device
 from bearcat.solvers.errors import InputError, fraction, non_negative, positive
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import lower, table_bytes
+from bearcat.solvers.levelset import devices
+from bearcat.solvers.levelset import kernels as kern
+from bearcat.solvers.levelset.devices import DEVICES, Device, choose_device
+from bearcat.solvers.levelset.hamiltonians import lower, table_bytes
 
 if TYPE_CHECKING:
-    from bearcat.solvers.hji_cuda import GpuSolve
+    from bearcat.solvers.levelset.cuda import GpuSolve
 
 __all__ = ["DEVICES", "SCHEMES", "PaddedField", "ReachAvoidResult", "required_bytes", "solve_reach_avoid"]
 
@@ -124,7 +124,7 @@ class ReachAvoidResult:
     solve. ``ceiling`` is None on the full grid; on a local solve, the
     value at which values above the set are clamped (``solve_reach_avoid``
     says what that leaves right). ``device`` names what solved it
-    (``solvers.devices.Device``)."""
+    (``solvers.levelset.devices.Device``)."""
 
     value: np.ndarray
     converged: bool
@@ -208,7 +208,7 @@ def solve_reach_avoid(
     """The reach-avoid set of ``target`` (``l``, <= 0 inside) avoiding
     ``avoid`` (``g``, <= 0 inside; None for none) within ``horizon``.
 
-    ``hamiltonian`` is a ``solvers.hamiltonians.SimpleMotion`` or
+    ``hamiltonian`` is a ``solvers.levelset.hamiltonians.SimpleMotion`` or
     ``ControlAffine``; ``target`` and ``avoid`` are arrays of the grid's
     shape or ``PaddedField``s, which are used without a copy. Time and values are in the units of the dynamics and of
     ``l`` and ``g``: ``tol`` is a value change over ``check_every`` time units
@@ -239,7 +239,7 @@ def solve_reach_avoid(
     gradient outside the set only where the value is below the ceiling.
 
     ``device`` is ``"cpu"``, ``"cuda"`` (the kernels of
-    ``solvers.hji_cuda`` on a GPU, through numba-cuda) or ``"auto"`` (a GPU
+    ``solvers.levelset.cuda`` on a GPU, through numba-cuda) or ``"auto"`` (a GPU
     if numba-cuda finds one and the problem suits it, else the CPU; the
     choice is logged, and ``ReachAvoidResult.device`` names it). Both solve
     the same scheme and give the same sets, but for nodes on the front that
@@ -296,7 +296,7 @@ def solve_reach_avoid(
     with_gradient = record_tstar and record_gradient
     solve: _CpuSolve | GpuSolve
     if chosen.kind == "cuda":
-        from bearcat.solvers import hji_cuda
+        from bearcat.solvers.levelset import cuda as hji_cuda
 
         hji_cuda.check_memory(need, str(chosen), grid)
         solve = hji_cuda.GpuSolve(
@@ -354,7 +354,7 @@ def solve_reach_avoid(
 
 
 def _device(device: str, local: bool, grid: Grid, ham_args: tuple) -> Device:
-    """The device to solve on (``solvers.devices.choose_device``): the CPU
+    """The device to solve on (``solvers.levelset.devices.choose_device``): the CPU
     for the narrow band, and for a problem the CUDA kernels do not take."""
     if device not in DEVICES:
         raise InputError(f"device must be one of {', '.join(DEVICES)}, got {device!r}")
@@ -364,7 +364,7 @@ def _device(device: str, local: bool, grid: Grid, ham_args: tuple) -> Device:
         return choose_device(device, unsupported="the narrow band (local) runs on the CPU only")
     if isinstance(devices.find_gpu(), str):
         return choose_device(device)  # no GPU: the CPU, or a refusal, without importing the kernels
-    from bearcat.solvers import hji_cuda
+    from bearcat.solvers.levelset import cuda as hji_cuda
 
     return choose_device(device, unsupported=hji_cuda.unsupported(grid.ndim, ham_args))
 

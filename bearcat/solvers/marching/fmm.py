@@ -5,7 +5,7 @@ times (a defender's ``psi``). With a per-node ``ceiling`` it is the modified
 method of thesis 4.1.3: a node whose value, when it is accepted, is not below
 its ceiling (the defenders' time-to-capture) is set to infinity and stops the
 front there, so the finite nodes are exactly the safe-reachable set.
-Optimal paths run down the result (``solvers.descent``).
+Optimal paths run down the result (``solvers.marching.descent``).
 
 Arrays are indexed ``[ix, iy]`` (x east, y north); ``spacing`` is ``h`` or
 ``(hx, hy)`` in metres, speeds are metres per second, values are seconds.

@@ -1,9 +1,9 @@
 """The planar quadrotor of thesis eq. 6.3 and the fixed control laws of its
 backflip (6.1.3), as compiled functions of plain arrays.
 
-One model serves two users: the reach sets of ``solvers.backflip`` fold a
+One model serves two users: the reach sets of ``solvers.maneuvers.backflip`` fold a
 mode's law into its dynamics (eq. 6.2), and the flight simulator of
-``solvers.backflip_flight`` integrates the full six-state model with the
+``solvers.maneuvers.backflip_flight`` integrates the full six-state model with the
 same laws. Keeping both on these functions is what makes the simulated
 flips a test of the sets rather than of a second model.
 

@@ -43,10 +43,9 @@ import numpy as np
 
 from bearcat.solvers.errors import InputError, fraction, positive
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import Box, ControlAffine
-from bearcat.solvers.hji import ReachAvoidResult
-from bearcat.solvers.maneuver import Containment, Mode, avoid_set, box, capture_sequence, capture_set, forward_reach
-from bearcat.solvers.planar_quad import (
+from bearcat.solvers.levelset.hamiltonians import Box, ControlAffine
+from bearcat.solvers.levelset.hji import ReachAvoidResult
+from bearcat.solvers.maneuvers.planar_quad import (
     DRIFT,
     IMPULSE,
     RECOVERY,
@@ -55,6 +54,15 @@ from bearcat.solvers.planar_quad import (
     rotational_acceleration,
     thrust_acceleration,
     thrusts,
+)
+from bearcat.solvers.maneuvers.sets import (
+    Containment,
+    Mode,
+    avoid_set,
+    box,
+    capture_sequence,
+    capture_set,
+    forward_reach,
 )
 
 __all__ = ["Backflip", "BackflipSets", "SetProgress", "TargetBox", "design"]

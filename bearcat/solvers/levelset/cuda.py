@@ -1,13 +1,13 @@
-"""CUDA kernels of the level-set solver in ``solvers.hji``, and the arrays
+"""CUDA kernels of the level-set solver in ``solvers.levelset.hji``, and the arrays
 they keep on the GPU between steps; numba-cuda compiles them.
 
 Importing this module imports numba-cuda (``pip install 'bearcat[cuda]'``):
-``solvers.hji`` does so only for a solve on device ``"cuda"``
-(``solvers.devices``). Under numba's CUDA simulator the same kernels run
+``solvers.levelset.hji`` does so only for a solve on device ``"cuda"``
+(``solvers.levelset.devices``). Under numba's CUDA simulator the same kernels run
 on the CPU, which is how they are tested without a GPU.
 
 The arrays are the CPU solver's, padded alike (three ghost nodes each side
-of the last two axes, ``hji_kernels``), so the fields a caller built in
+of the last two axes, ``levelset.kernels``), so the fields a caller built in
 place go to the GPU as they are and the value comes back as the CPU
 returns it. The kernels:
 
@@ -17,7 +17,7 @@ returns it. The kernels:
   reach-avoid update and the T* record. One thread per grid node (a
   grid-stride loop, so a launch of any size covers the grid); neighbours
   beyond the grid's edge along any axis are made up from the edge as they
-  are read (``hji_kernels._beyond``), so no ghost is stored and no second
+  are read (``levelset.kernels._beyond``), so no ghost is stored and no second
   kernel runs per stage.
 - ``_max_change``, the convergence check: ``max |u - snapshot|`` over the
   padded arrays, ghost entries included with the values the CPU's
@@ -28,16 +28,16 @@ The arithmetic is the CPU kernels' own wherever numba lets it be: the WENO5
 weights (``_weno5``), the ghost rule (``_beyond``), the control-affine
 Hamiltonian (``_affine_hamiltonian``, with ``_input_extremum``) and T*'s
 entry time (``_entry_time``) are the ``@njit`` functions of
-``hji_kernels``, which numba-cuda compiles for the GPU when a kernel calls
+``levelset.kernels``, which numba-cuda compiles for the GPU when a kernel calls
 them. What is written again here is what the CPU kernels evaluate over
 whole runs of a plane, so that their loops vectorise, and a GPU thread
 evaluates at one node: the divided differences, the simple-motion
-Hamiltonian (``hji_kernels._simple_motion_block``), the Runge-Kutta
-combination and the clamps (``hji_kernels.stage``), each the same formula
+Hamiltonian (``levelset.kernels._simple_motion_block``), the Runge-Kutta
+combination and the clamps (``levelset.kernels.stage``), each the same formula
 in the same order of operations.
 
 numba's on-disk cache checks only the file of the cached function, so a
-change to a shared function in ``hji_kernels`` would not reach the cached
+change to a shared function in ``levelset.kernels`` would not reach the cached
 kernels by itself: ``SHARED_SOURCE`` records a hash of the shared functions'
 source, and while it does not match (a test says when), the kernels are
 compiled afresh in each process instead of cached.
@@ -53,8 +53,8 @@ import numpy as np
 from numba import cuda, float64, int64, njit
 from numba.core import config
 
-from bearcat.solvers import hji_kernels as kern
 from bearcat.solvers.errors import InputError
+from bearcat.solvers.levelset import kernels as kern
 
 SIMULATED = bool(getattr(config, "ENABLE_CUDASIM", 0))
 """Whether numba runs CUDA kernels in its simulator (``NUMBA_ENABLE_CUDASIM=1``)."""
@@ -73,7 +73,7 @@ REDUCE_THREADS = 4 if SIMULATED else 256
 REDUCE_BLOCKS = 1024
 
 SHARED = (kern._weno5, kern._beyond, kern._affine_hamiltonian, kern._input_extremum, kern._entry_time)
-"""The ``hji_kernels`` functions the CUDA kernels call."""
+"""The ``levelset.kernels`` functions the CUDA kernels call."""
 SHARED_SOURCE = "c39c64601f9adea8"
 """``shared_source()`` when the kernels were last checked against ``SHARED``."""
 
@@ -169,7 +169,7 @@ def _stage(
     tgrad,
 ):
     """One Runge-Kutta stage in Shu-Osher form, ``out = a u0 + b (v + dt
-    L(v))``, at every grid node: ``hji_kernels.stage``'s arithmetic (which
+    L(v))``, at every grid node: ``levelset.kernels.stage``'s arithmetic (which
     see, with its arguments) at one node per thread, reading neighbours in
     place. ``strides`` holds the padded offset of one step along each axis;
     ghost entries of ``out`` are left as they are, never read."""
@@ -306,7 +306,7 @@ def _stage(
 
 @_helper
 def _simple_motion(idx, pl, pr, half, zero, axis_player, player_sign, speed, speed_offset, speed_stride, spd, norm):
-    """``hji_kernels._simple_motion_block`` at one node: the Lax-Friedrichs
+    """``levelset.kernels._simple_motion_block`` at one node: the Lax-Friedrichs
     Hamiltonian ``sum_q sign_q v_q |p_q|`` plus each axis's dissipation at
     its player's local speed, summed in the same order."""
     ndim = axis_player.shape[0]
@@ -362,7 +362,7 @@ def _stored_row(v, row, c, nb, sign_b):
 def _max_change(u, snapshot, shape, edge_sign, out):
     """``out[0] = max(out[0], max |u - snapshot|)`` over the padded arrays,
     ghosts as the CPU stores them; inf as soon as either holds a number that
-    is not finite (``hji_kernels.max_abs_difference``)."""
+    is not finite (``levelset.kernels.max_abs_difference``)."""
     ndim = shape.shape[0]
     na, nb = shape[ndim - 2], shape[ndim - 1]
     plane = (na + 6) * (nb + 6)
@@ -431,7 +431,7 @@ class GpuSolve:
     value buffers, the convergence snapshot, the target and avoid functions,
     the lowered Hamiltonian and T*, uploaded once; only the value and T*
     come back, at the end (``result``), and one number per convergence
-    check. The interface of ``solvers.hji._CpuSolve``."""
+    check. The interface of ``solvers.levelset.hji._CpuSolve``."""
 
     def __init__(
         self,

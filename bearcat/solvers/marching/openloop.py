@@ -21,10 +21,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bearcat.solvers import fmm
-from bearcat.solvers.descent import descend
 from bearcat.solvers.errors import InputError, non_negative
 from bearcat.solvers.grid import Grid
+from bearcat.solvers.marching import fmm
+from bearcat.solvers.marching.descent import descend
 
 __all__ = ["Defender", "OpenLoopPath", "OpenLoopSolution", "StageSolution", "solve_openloop"]
 

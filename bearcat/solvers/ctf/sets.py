@@ -17,7 +17,7 @@ of a function built from signed distances of the 2-D geometry (``CtfGeometry``),
 combined with ``min`` (union) and ``max`` (intersection); ``W_A`` takes the
 value of ``R_A`` itself as the level set of the second stage's target.
 
-The edges of the grid are the edges of the area: ``solvers.hji`` makes
+The edges of the grid are the edges of the area: ``solvers.levelset.hji`` makes
 leaving through them a loss for the attacker and a forfeit for the
 defender without any avoid rows, so a return strip along an edge is reached
 up to its last row. Only the part of the box outside a non-rectangular area
@@ -37,8 +37,14 @@ import numpy as np
 
 from bearcat.solvers.errors import InputError, non_negative, positive
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.hamiltonians import Player, SimpleMotion
-from bearcat.solvers.hji import PaddedField, ReachAvoidResult, available_bytes, required_bytes, solve_reach_avoid
+from bearcat.solvers.levelset.hamiltonians import Player, SimpleMotion
+from bearcat.solvers.levelset.hji import (
+    PaddedField,
+    ReachAvoidResult,
+    available_bytes,
+    required_bytes,
+    solve_reach_avoid,
+)
 
 __all__ = ["STAGES", "CtfGeometry", "CtfSolution", "Rules", "SetSolution", "required_game_bytes", "solve_ctf"]
 
@@ -54,7 +60,7 @@ SET_NAMES = {"return": "R_A", "capture": "F_A", "win": "W_A"}
 
 DEFAULT_TOL = 0.05
 """Convergence tolerance in cells, per two-cell window: the value is kept
-from rising (``solvers.hji``, ``monotone``), so it settles rather than
+from rising (``solvers.levelset.hji``, ``monotone``), so it settles rather than
 ripples and the check finds the fixed point."""
 
 # Nodes this close to a blocked place's edge (in cells) still count as free:
@@ -142,7 +148,7 @@ class SetSolution:
     steps: int
     time_to_win: np.ndarray | None = None
     node_updates: int | None = None  # None when loaded rather than solved
-    device: str | None = None  # what solved it (solvers.devices.Device); None when loaded
+    device: str | None = None  # what solved it (solvers.levelset.devices.Device); None when loaded
 
     @property
     def attacker_wins(self) -> np.ndarray:
@@ -219,7 +225,7 @@ def solve_ctf(
     cells while the faster player crosses two cells; ``known`` supplies
     sets already solved (e.g. R_A from a cache), keyed like
     ``CtfSolution.sets``. ``local`` solves each set by the narrow band
-    (``solvers.hji.solve_reach_avoid``): the same sets and T*, with the
+    (``solvers.levelset.hji.solve_reach_avoid``): the same sets and T*, with the
     defender's margins clamped a few cells out (``CtfQueries`` says what
     that leaves of the guidance). ``device`` is where the sets are solved
     (``"auto"``, ``"cpu"`` or ``"cuda"``, as ``solve_reach_avoid`` takes it);

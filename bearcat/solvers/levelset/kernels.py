@@ -1,4 +1,4 @@
-"""Compiled kernels of the level-set solver in ``solvers.hji``.
+"""Compiled kernels of the level-set solver in ``solvers.levelset.hji``.
 
 Every function the stage kernel calls lives in this one module because numba
 invalidates an on-disk cache entry only when the file holding the cached
@@ -100,7 +100,7 @@ def _beyond(edge, inner, distance, sign):
     """The value ``distance`` nodes beyond a grid edge: the edge value moved
     by the edge slope's magnitude, upwards (``sign`` +1) or downwards (-1),
     so that whoever the ``sign`` works against never gains by leaving the
-    grid (see ``solvers.hji``)."""
+    grid (see ``solvers.levelset.hji``)."""
     return edge + sign * abs(edge - inner) * distance
 
 
@@ -231,7 +231,7 @@ def _affine_hamiltonian(pl, pr, j, node, f0s, Gs, Ks, alphas, u_kind, u_a, u_b, 
     and ``pr[k, j]``, the tabulated ``f0``, ``G``, ``K`` and dissipation
     coefficients (``tabulate``) and scratch ``p``, ``cu`` and ``cd`` (at least
     as long as the state, the control and the disturbance). The CPU stage and
-    the CUDA kernels (``solvers.hji_cuda``) both call it."""
+    the CUDA kernels (``solvers.levelset.cuda``) both call it."""
     ndim = f0s.shape[1]
     h = 0.0
     diss = 0.0

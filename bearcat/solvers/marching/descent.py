@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers import fmm
 from bearcat.solvers.errors import InputError, format_point
 from bearcat.solvers.grid import Grid
 from bearcat.solvers.interpolation import bilinear, upwind_gradient
+from bearcat.solvers.marching import fmm
 
 __all__ = ["Descent", "aim_ahead", "compile_kernels", "descend", "descend_steps"]
 

@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from bearcat.solvers.ctf_queries import CtfQueries, StateReport, interpolate_2d
+from bearcat.solvers.ctf.queries import CtfQueries, StateReport, interpolate_2d
 from bearcat.solvers.errors import InputError
 
 __all__ = ["Playout", "play"]

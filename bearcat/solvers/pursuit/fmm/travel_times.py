@@ -12,10 +12,10 @@ from typing import Any, TypeVar
 import numba
 import numpy as np
 
-from bearcat.solvers import fmm
 from bearcat.solvers.errors import InputError, non_negative
 from bearcat.solvers.grid import Grid
-from bearcat.solvers.pursuit_fmm.rays import first_steps
+from bearcat.solvers.marching import fmm
+from bearcat.solvers.pursuit.fmm.rays import first_steps
 
 __all__ = ["Front", "TravelTimes"]
 

@@ -10,10 +10,10 @@ import math
 import numpy as np
 
 from bearcat.solvers.errors import InputError, non_negative, positive
-from bearcat.solvers.pursuit_fmm.area_gradient import METHODS, AreaGradient, area_gradient
-from bearcat.solvers.pursuit_fmm.headings import away, slide, toward
-from bearcat.solvers.pursuit_fmm.safe_set import SafeSet, check_pursuer_speeds, march_safe_set
-from bearcat.solvers.pursuit_fmm.travel_times import TravelTimes
+from bearcat.solvers.pursuit.fmm.area_gradient import METHODS, AreaGradient, area_gradient
+from bearcat.solvers.pursuit.fmm.headings import away, slide, toward
+from bearcat.solvers.pursuit.fmm.safe_set import SafeSet, check_pursuer_speeds, march_safe_set
+from bearcat.solvers.pursuit.fmm.travel_times import TravelTimes
 
 __all__ = ["FarthestPointEvader", "FmmAreaPursuit", "GeodesicPursuit"]
 

@@ -3,7 +3,7 @@
 A fix is stale and noisy: the player is somewhere in a disk around it, of
 radius top speed x the fix's age plus its 95 % error radius, and not inside
 an obstacle (nor, for the defender, in a region it may not enter). The plain
-queries (``ctf_queries``) answer for the fixes as if they were exact; the
+queries (``ctf.queries``) answer for the fixes as if they were exact; the
 breakdowns of thesis 3.5.2 (the false go, the defender faked out by a stale
 position) come from that. This module answers for the sets instead:
 
@@ -38,8 +38,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from bearcat.solvers.ctf import EDGE_SLACK
-from bearcat.solvers.ctf_queries import CtfQueries, StateReport, interpolate_2d
+from bearcat.solvers.ctf.queries import CtfQueries, StateReport, interpolate_2d
+from bearcat.solvers.ctf.sets import EDGE_SLACK
 from bearcat.solvers.errors import InputError
 
 __all__ = ["Cover", "RobustCtf", "SideAnswer"]

@@ -1,6 +1,6 @@
 """Which processor a level-set solve runs on: ``"cpu"`` (numba's CPU
 kernels on every core numba uses), ``"cuda"`` (the numba-cuda kernels of
-``solvers.hji_cuda`` on a CUDA GPU) or ``"auto"`` (a GPU when numba-cuda
+``solvers.levelset.cuda`` on a CUDA GPU) or ``"auto"`` (a GPU when numba-cuda
 finds one, else the CPU).
 
 numba-cuda is an optional dependency (``pip install 'bearcat[cuda]'``): it
