@@ -141,6 +141,45 @@ def change(text: str) -> tuple[str, object]:
     return key.strip(), read
 
 
+def add_struct_options(parser: argparse.ArgumentParser, struct: type, *, names=None, flags=None, types=None) -> None:
+    """A flag per field of the msgspec ``struct`` (those in ``names``; by
+    default every field but the first), so a setting a struct carries across
+    a process boundary is spelled once, in the struct: the flag is the
+    field's name with dashes (or ``flags[name]``), its help the field's
+    description and its placeholder the ``metavar`` of its ``extra``. A bool
+    is a switch, a tuple a repeatable flag, a Literal its choices, an int
+    read as one (or each by ``types[name]``). A flag not given is None, so
+    the struct's own default stands."""
+    from msgspec import inspect as mi
+
+    info = mi.type_info(struct)
+    assert isinstance(info, mi.StructType), f"{struct} is not a msgspec Struct"
+    for field in info.fields[1:] if names is None else [f for f in info.fields if f.name in names]:
+        node, description = field.type, ""
+        extra: dict = {}
+        while isinstance(node, mi.Metadata | mi.UnionType):
+            if isinstance(node, mi.Metadata):
+                description = (node.extra_json_schema or {}).get("description", description)
+                extra = {**extra, **(node.extra or {})}
+                node = node.type
+            else:
+                node = next(t for t in node.types if not isinstance(t, mi.NoneType))
+        options: dict = {"dest": field.name, "help": description, "default": None}
+        if isinstance(node, mi.BoolType):
+            options["action"] = "store_true"
+        elif isinstance(node, mi.VarTupleType | mi.ListType):
+            options["action"] = "append"
+        elif isinstance(node, mi.LiteralType):
+            options["choices"] = node.values
+        elif isinstance(node, mi.IntType):
+            options["type"] = int
+        if types and field.name in types:
+            options["type"] = types[field.name]
+        if "metavar" in extra:
+            options["metavar"] = extra["metavar"]
+        parser.add_argument((flags or {}).get(field.name, "--" + field.name.replace("_", "-")), **options)
+
+
 def add_batch_options(parser: argparse.ArgumentParser, what: str) -> None:
     """Where a batch runs its ``what``: ``--workers N`` local processes or,
     instead, ``--cluster ADDRESS``, a Dask cluster's scheduler. One spelling

@@ -10,11 +10,11 @@ from bearcat.cli import arguments
 from bearcat.cli.arguments import Commands
 from bearcat.cli.presolve import await_behind, presolve
 from bearcat.cli.writing import make_directory, writing
-from bearcat.runtime.peer_spec import ROLES
+from bearcat.runtime.peer_spec import ROLES, PeerSpec
 from bearcat.runtime.peers import NETWORKS
 from bearcat.runtime.run_directory import fresh
 from bearcat.runtime.solve_ahead import SolveBehind, compile_kernels_behind
-from bearcat.scenarios.faults import GROUND, load_faults
+from bearcat.scenarios.faults import load_faults
 from bearcat.scenarios.schema import TRANSPORTS, load_scenario
 
 
@@ -143,95 +143,7 @@ def register(commands: Commands) -> None:
         help="every setting from this file (RUN/peers/NAME.spec.json, as bearcat run writes it) instead of "
         "ROLE and the options below",
     )
-    peer.add_argument(
-        "--scenario",
-        metavar="SCENARIO",
-        help="built-in scenario name, TOML file, or zenoh:GAME to fetch it (and its map) from the ground station",
-    )
-    peer.add_argument(
-        "--id", default=GROUND, metavar="ID", help="the walker's or UAV's id (ignored for the ground station)"
-    )
-    peer.add_argument(
-        "--connect",
-        action="append",
-        default=[],
-        metavar="ENDPOINT",
-        help="Zenoh endpoint to connect to, e.g. tcp/127.0.0.1:7447 (repeatable)",
-    )
-    peer.add_argument(
-        "--listen",
-        action="append",
-        metavar="ENDPOINT",
-        help="Zenoh endpoint to listen on (default tcp/127.0.0.1:0; clients do not listen)",
-    )
-    peer.add_argument(
-        "--mode",
-        choices=("peer", "client"),
-        default="peer",
-        help="Zenoh mode: peer (default) or client of the router it connects to (what bearcat run uses)",
-    )
-    peer.add_argument(
-        "--judge",
-        choices=("truth", "fixes"),
-        default="truth",
-        help="what the referee judges on: the simulation's truth (default), or the fixes, for real players",
-    )
-    peer.add_argument("--seed", type=arguments.seed, metavar="S", help="seed (default: the scenario's)")
-    peer.add_argument("--netem", metavar="PROFILE", help="network profile instead of the scenario's")
-    peer.add_argument(
-        "--network",
-        choices=NETWORKS,
-        default="shim",
-        help="shim (default): this peer impairs what it receives; kernel: the network it runs on does "
-        "(GPS and compass error stay in the phone)",
-    )
-    peer.add_argument(
-        "--transport",
-        choices=TRANSPORTS,
-        help="how fixes and guidance travel: tcp, or udp to the same endpoints; default: the scenario's",
-    )
-    peer.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
-    peer.add_argument(
-        "--certs",
-        type=Path,
-        metavar="DIR",
-        help="the game's certificates (RUN/certs of a bearcat run, or bearcat certs init): this peer seals what "
-        "it sends with ID.key and believes only senders the authority vouches for; without it, every name",
-    )
-    peer.add_argument(
-        "--secure",
-        action="store_true",
-        help="join a guarded bus: a client of the router over tls/ only, presenting ID.pem from --certs",
-    )
-    peer.add_argument(
-        "--faults", type=Path, metavar="FILE", help="the run's fault plan: apply the faults the launcher announces"
-    )
-    peer.add_argument(
-        "--resume",
-        action="store_true",
-        help="take up the game where this peer's log in --out DIR left it (a peer restarted mid-game)",
-    )
-    peer.add_argument(
-        "--vehicle",
-        metavar="URL",
-        help="uav: MAVSDK URL of the vehicle, e.g. udpin://0.0.0.0:14540 (PX4 SITL, bearcat vehicle) "
-        "or serial:///dev/ttyACM0:57600 (a real PX4)",
-    )
-    peer.add_argument(
-        "--sysid", type=int, metavar="N", help="uav: the vehicle's MAVLink system id (default: the first autopilot)"
-    )
-    peer.add_argument(
-        "--emulated",
-        action="store_true",
-        help="uav: the vehicle is simulated, so its telemetry is the truth the referee and recorder see",
-    )
-    peer.add_argument(
-        "--provisional",
-        action="store_true",
-        help="ground-station: while the scenario's sets are not in the cache, answer from provisional ones "
-        "(rules.provisional_grid) and take the scenario's up once another process has solved them",
-    )
-    _page_arguments(peer, listen="--page")
+    arguments.add_struct_options(peer, PeerSpec, types={"seed": arguments.seed, "page": _address})
     peer.set_defaults(run=run_peer)
 
     phone = commands.add_parser(
@@ -243,10 +155,13 @@ def register(commands: Commands) -> None:
     phone.add_argument("--connect", action="append", required=True, metavar="ENDPOINT", help="the game's router")
     phone.add_argument("--game", required=True, metavar="GAME", help="the game (its ground station serves the map)")
     phone.add_argument("--id", required=True, metavar="AGENT", help="the agent this person plays")
-    phone.add_argument("--certs", type=Path, metavar="DIR", help="the game's certificates (as for bearcat peer)")
-    phone.add_argument("--secure", action="store_true", help="join a guarded bus over tls/ (as for bearcat peer)")
-    phone.add_argument("--out", type=Path, metavar="DIR", help="run directory for this peer's logs")
-    _page_arguments(phone, listen="--listen")
+    arguments.add_struct_options(
+        phone,
+        PeerSpec,
+        names=("certs", "secure", "out", "page", "cert", "key", "token_file"),
+        flags={"page": "--listen"},
+        types={"page": _address},
+    )
     phone.set_defaults(run=run_phone)
 
 
@@ -405,34 +320,13 @@ def run_phone(args) -> int:
         id=args.id,
         connect=tuple(args.connect),
         mode="client",
-        out=None if args.out is None else str(args.out),
-        certs=None if args.certs is None else str(args.certs),
-        secure=args.secure,
+        out=args.out,
+        certs=args.certs,
+        secure=bool(args.secure),
     )
     server = page_server(args.page, args.cert, args.key, args.token_file)  # one token, the link's and the page's
     print(f"open {server.url()} on the phone of {args.id}\n{server.qr()}", flush=True)
     return _run_spec(spec, server)
-
-
-def _page_arguments(parser, *, listen: str) -> None:
-    """The options of a real phone's page: where it is served, its certificate, its token."""
-    parser.add_argument(
-        listen,
-        dest="page",
-        type=_address,
-        metavar="HOST:PORT",
-        help="phone: where its page is served over HTTPS (default 0.0.0.0:8443)",
-    )
-    parser.add_argument("--cert", type=Path, metavar="FILE", help="phone: the page's HTTPS certificate (PEM)")
-    parser.add_argument(
-        "--key", type=Path, metavar="FILE", help="phone: its key; without --cert/--key, one is made for the session"
-    )
-    parser.add_argument(
-        "--token-file",
-        type=Path,
-        metavar="FILE",
-        help="phone: the secret the page's link carries (default: a new one, printed in the link)",
-    )
 
 
 def _host_and_port(text: str) -> tuple[str, int]:
