@@ -112,7 +112,7 @@ def definition(code: str, script: Path, project: Path, environment: Path | None 
 
 
 def test_an_editor_finds_the_solvers_from_a_checkout():
-    assert definition(QUERY, ROOT / "scratch.py", ROOT) == PACKAGE / "solvers" / "ctf.py"
+    assert definition(QUERY, ROOT / "scratch.py", ROOT) == PACKAGE / "solvers" / "ctf" / "sets.py"
 
 
 def test_installs_of_either_kind_in_either_order_import_from_anywhere(tmp_path):
@@ -125,7 +125,7 @@ def test_installs_of_either_kind_in_either_order_import_from_anywhere(tmp_path):
     venv = Venv(tmp_path / "venv")
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()
-    installed = venv.site / "bearcat" / "solvers" / "ctf.py"
+    installed = venv.site / "bearcat" / "solvers" / "ctf" / "sets.py"
 
     pip(venv.python, "install", "--no-deps", str(source))
     assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == installed
@@ -135,10 +135,10 @@ def test_installs_of_either_kind_in_either_order_import_from_anywhere(tmp_path):
 
     pip(venv.python, "install", "--no-deps", "-e", str(source))
     assert numba_cache.exists()  # what made the checkout's package a namespace package before
-    assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == source / "bearcat" / "solvers" / "ctf.py"
+    assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == source / "bearcat" / "solvers" / "ctf" / "sets.py"
     assert venv.where("bearcat", elsewhere) == source / "bearcat" / "__init__.py"
     script = elsewhere / "scratch.py"
-    assert definition(QUERY, script, elsewhere, venv.python) == source / "bearcat" / "solvers" / "ctf.py"
+    assert definition(QUERY, script, elsewhere, venv.python) == source / "bearcat" / "solvers" / "ctf" / "sets.py"
 
     pip(venv.python, "install", "--no-deps", str(source))
     assert venv.where("bearcat.solvers.ctf.sets", elsewhere) == installed
