@@ -237,3 +237,27 @@ def test_a_scheduler_without_bearcat_is_refused_before_any_trial(tmp_path):
     )
     trials = tmp_path / "out" / "trials.jsonl"
     assert not trials.exists() or trials.read_text() == ""
+
+
+def test_a_worker_that_cannot_import_a_plugin_is_refused_by_name_before_any_game(cluster, tmp_path):
+    """The client imports a behaviour of its own from its PYTHONPATH; the
+    workers, started without it, cannot: the study stops before any game,
+    naming a worker and the module."""
+    address, client = cluster
+    (tmp_path / "only_here_tactics.py").write_text(
+        "from bearcat.plugins import Behaviour\n\n\nclass Stand(Behaviour):\n"
+        "    def decide(self, now, me, screen, situation):\n        return None\n"
+    )
+    varied = ("--vary", 'agent.attacker.behaviour="only_here_tactics:Stand"', "--vary", "agent.attacker.options={}")
+    before = executed(client)
+    run = bearcat(
+        *STUDY, *varied, "--cluster", address, "--out", str(tmp_path / "out"), env={"PYTHONPATH": str(tmp_path)}
+    )
+    assert run.returncode == 2, run.stderr
+    said = run.stderr.splitlines()[-1]
+    assert said.startswith("bearcat: error: the Dask worker at tcp://127.0.0.1:"), said
+    assert "cannot play these games: " in said and said.endswith(
+        "agent[0].behaviour: 'only_here_tactics:Stand': module only_here_tactics cannot be imported: "
+        "ModuleNotFoundError: No module named 'only_here_tactics'"
+    ), said
+    assert set(difference(executed(client), before).values()) == {0}

@@ -177,9 +177,15 @@ def test_a_plugin_that_cannot_be_had_stops_the_run_in_one_sentence(folder, behav
     with pytest.raises(ScenarioError) as error:
         parse_scenario((folder / "bad.toml").read_text(), source="bad.toml", directory=folder)
     assert said in str(error.value) and "\n" not in str(error.value)
+
+
+def test_the_command_line_says_the_sentence_and_exits_2(folder):
+    """What ``parse_scenario`` refuses, a command prints as its one line of error, before anything starts."""
+    (folder / "bad.toml").write_text(with_attacker(_table("no_such_module_xyz:Thing")))
     ran = bearcat("simulate", "bad.toml", cwd=folder)
-    assert ran.returncode == 2 and ran.stderr.startswith("bearcat: error: bad.toml: ")
-    assert said in ran.stderr and len(ran.stderr.strip().splitlines()) == 1, ran.stderr
+    assert ran.returncode == 2 and ran.stderr.startswith("bearcat: error: bad.toml: agent[0].behaviour: ")
+    assert ran.stderr.strip().endswith("No module named 'no_such_module_xyz'")
+    assert len(ran.stderr.strip().splitlines()) == 1, ran.stderr
 
 
 def test_an_entry_point_that_fails_to_load_is_named_with_its_distribution(tmp_path):
@@ -467,7 +473,7 @@ class Corners(TaskingPolicy):
 def search_with(tmp_path, policy: str, options: str = "") -> Path:
     """The search scenario, its UAV tasked by ``policy``."""
     text = (ROOT / "bearcat" / "scenarios" / "data" / "search.toml").read_text()
-    text = text.replace('search = "reachability"', f'search = "{policy}"\n{options}').replace("240.0", "60.0")
+    text = text.replace('search = "reachability"', f'search = "{policy}"\n{options}').replace("240.0", "30.0")
     (tmp_path / "search.toml").write_text(text)
     return tmp_path / "search.toml"
 
@@ -512,7 +518,17 @@ def test_an_installed_tasking_policy_plays_by_its_short_name(tactics, tmp_path):
     entries = {(e["kind"], e["name"]): e for e in json.loads(listed.stdout)["entries"]}
     assert entries["tasking policy", "escort"]["origin"].startswith("distribution bearcat-tactics")
     search_with(tmp_path, "escort")
+    checked = bearcat("plugins", "check", "search.toml", cwd=tmp_path, env={"PYTHONPATH": str(tactics)})
+    assert checked.returncode == 0 and "q1: tasking policy escort [distribution bearcat-tactics" in checked.stdout
     ran = bearcat("simulate", "search.toml", "--json", cwd=tmp_path, env={"PYTHONPATH": str(tactics)})
     assert ran.returncode == 0, ran.stderr
     game = json.loads(ran.stdout.splitlines()[0])
     assert game["plugin_faults"] == {} and game["reason"]
+
+
+def test_the_pytest_plugins_fixtures_play_the_docs_class_under_a_fault_plan(folder, bearcat_simulate):
+    """The fixtures a user's own fault suite gets (``bearcat.suites.plugin``) take the scenario naming the class."""
+    run = bearcat_simulate(folder / "mine.toml", [{"kind": "pause", "target": "gs", "at": 2.0, "duration": 1.0}])
+    run.assert_held()
+    assert run.outcome["ended"] and [f["kind"] for f in run.outcome["faults"]] == ["pause"]
+    assert run.held("plugins") is True

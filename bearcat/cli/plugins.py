@@ -6,8 +6,9 @@ where it comes from and its summary; an entry point that fails to load is
 listed with the sentence saying why, and the exit code is 1.
 
 ``check SCENARIO`` reads the scenario, which imports every plug-in it names
-and reads each one's options into its type, then makes each plug-in once as
-a game would, without playing: exit 0 when all of them load, 2 with one
+(each agent's behaviour, each UAV's tasking policy) and reads each one's
+options into its type, then makes each plug-in once as a game would, with
+the same seeded generator, without playing: exit 0 when all of them load, 2 with one
 sentence naming the culprit when the scenario cannot be read, 1 when a
 plug-in's factory fails.
 """
@@ -23,7 +24,8 @@ from bearcat.cli.output import Output
 def register(commands: Commands) -> None:
     p = commands.add_parser(
         "plugins",
-        description="List the behaviours, built-in and installed, that scenarios may name, or check what one names.",
+        description="List the behaviours and UAV tasking policies, built-in and installed, that scenarios may "
+        "name, or check what one names.",
     )
     verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     listing = verbs.add_parser("list", help="every registered plug-in, with where it comes from")
@@ -67,31 +69,30 @@ def run_list(args) -> int:
 
 
 def run_check(args) -> int:
-    from bearcat.scenarios.cast import stream
+    from bearcat.scenarios.cast import TASKER, stream
     from bearcat.scenarios.schema import load_scenario
 
     scenario = load_scenario(args.scenario)
     out = Output(args.json)
+    named = [(a.id, "behaviour", scenario.behaviour_of(a.id), a.id, "behaviour") for a in scenario.agents]
+    named += [(u.id, "tasking policy", scenario.tasking_of(u.id), TASKER, "tasking") for u in scenario.uavs]
     found: list[dict[str, object]] = []
-    failed = 0
-    for agent in scenario.agents:
-        chosen = scenario.behaviour_of(agent.id)
+    for who, kind, chosen, drawer, purpose in named:
         row: dict[str, object] = {
-            "agent": agent.id,
-            "kind": "behaviour",
+            "for": who,
+            "kind": kind,
             "name": chosen.entry.name,
             "origin": chosen.entry.origin,
             "options": msgspec.to_builtins(chosen.options),
             "made": True,
         }
         try:
-            chosen.entry.factory(chosen.options, stream(scenario.seed, agent.id, "behaviour"))
+            chosen.entry.factory(chosen.options, stream(scenario.seed, drawer, purpose))
         except Exception as exc:
-            failed += 1
             row["made"] = False
             row["error"] = f"{type(exc).__name__}: {exc}"
         found.append(row)
         state = "loads" if row["made"] else f"FAILS to be made: {row['error']}"
-        out.say(f"{agent.id}: behaviour {row['name']} [{row['origin']}] with {row['options']}: {state}")
+        out.say(f"{who}: {kind} {row['name']} [{row['origin']}] with {row['options']}: {state}")
     out.json(found)
-    return 1 if failed else 0
+    return 0 if all(row["made"] for row in found) else 1

@@ -74,7 +74,7 @@ REDUCE_BLOCKS = 1024
 
 SHARED = (kern._weno5, kern._beyond, kern._affine_hamiltonian, kern._input_extremum, kern._entry_time)
 """The ``levelset.kernels`` functions the CUDA kernels call."""
-SHARED_SOURCE = "c39c64601f9adea8"
+SHARED_SOURCE = "b0efba7c5b769c86"
 """``shared_source()`` when the kernels were last checked against ``SHARED``."""
 
 
