@@ -30,7 +30,12 @@ A UAV tasking policy is the same, a ``TaskingPolicy`` subclass a UAV's
 table names (``search = "mine.py:Spiral"``, ``search_options = {...}``),
 whose ``next_point(uav, view)`` answers where the UAV searches next.
 
-A distribution makes a short name of either with an entry point::
+A game of one's own subclasses ``Game``: its rules type, its two teams,
+the forms its guidance has, and its referee, guidance service and people
+(see the built-in ones in ``bearcat.scenarios.cast``); ``game = "..."``
+names it.
+
+A distribution makes a short name of any of these with an entry point::
 
     [project.entry-points."bearcat.behaviours"]
     sneaky = "mypkg.tactics:Sneaky"
@@ -78,13 +83,15 @@ from bearcat.agents.options import (
     Share,
 )
 from bearcat.agents.registry import Entry, PluginError, Registry
+from bearcat.scenarios.game import GAMES, Game
 
-REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS, TASKING)
+REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS, TASKING, GAMES)
 """Every kind of plug-in, each its registry."""
 
 __all__ = [
     "BEHAVIOURS",
     "COMMITS",
+    "GAMES",
     "NEEDS_SETS",
     "REGISTRIES",
     "TAKES_KEYS",
@@ -95,6 +102,7 @@ __all__ = [
     "Commits",
     "Distance",
     "Entry",
+    "Game",
     "Lag",
     "Memory",
     "Navigator",

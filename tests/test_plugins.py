@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from bearcat.agents.ground_station.tasking import TASKING
 from bearcat.agents.guard import Guard
 from bearcat.agents.human.behaviour import BEHAVIOURS, direction_problem
 from bearcat.runtime.simulate import simulate
+from bearcat.scenarios.game import GAMES
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
 from bearcat.suites.checker import check_run
 from tests.support.scenario_files import scenario_text
@@ -90,6 +92,7 @@ def tactics(tmp_path_factory) -> Path:
 def test_the_docs_class_loads_from_its_file_with_its_options(folder):
     checked = bearcat("plugins", "check", "mine.toml", cwd=folder)
     assert checked.returncode == 0, checked.stderr
+    assert checked.stdout.startswith("scenario: game ctf [bearcat] with its rules {'capture_radius': 2.5")
     assert (
         "attacker: behaviour sidestep.py:Sidestep [sidestep.py] with {'reach': 10.0, 'angle': 60.0}: loads"
         in checked.stdout
@@ -212,27 +215,27 @@ def _table(behaviour: str, options: str = "") -> str:
     )
 
 
-def test_no_behaviour_name_is_compared_outside_the_registry():
-    """A behaviour is reached through its entry and its declared traits,
+@pytest.mark.parametrize(
+    "registry, about",
+    [(BEHAVIOURS, "behaviour"), (TASKING, "search|strateg|polic"), (GAMES, "game")],
+    ids=["behaviours", "tasking", "games"],
+)
+def test_no_plugins_name_is_compared_outside_its_registry(registry, about):
+    """A plug-in is reached through its entry and its declared traits,
     never by comparing its name with a string."""
-    names = set(BEHAVIOURS.names())
+    names = set(registry.names())
     found = []
     for path in (ROOT / "bearcat").rglob("*.py"):
-        if path.name == "behaviours.py":  # the built-ins' own table
+        if path.name == f"{registry.builtins.rsplit('.', 1)[1]}.py":  # the built-ins' own table
             continue
         for node in ast.walk(ast.parse(path.read_text())):
-            if isinstance(node, ast.Compare):
+            if isinstance(node, ast.Compare) and re.search(about, ast.unparse(node), re.I):
                 for side in [node.left, *node.comparators]:
                     values = side.elts if isinstance(side, ast.Tuple | ast.List | ast.Set) else [side]
                     for value in values:
-                        if isinstance(value, ast.Constant) and value.value in names and _about_behaviour(node):
+                        if isinstance(value, ast.Constant) and value.value in names:
                             found.append(f"{path.relative_to(ROOT)}:{node.lineno} compares with {value.value!r}")
     assert found == []
-
-
-def _about_behaviour(node: ast.Compare) -> bool:
-    """Whether the comparison reads a behaviour (by the names it uses)."""
-    return "behaviour" in ast.unparse(node).lower()
 
 
 # ---------------------------------------------------------------- the guard

@@ -162,6 +162,8 @@ class Registry(Generic[T]):
         elif inspect.isclass(found) and self.protocol in inspect.getmro(found):
             declared: Any = found  # a subclass of the protocol, which declares Options and traits
             doc = inspect.getdoc(found) or ""
+            if not hasattr(declared, "Options"):
+                raise PluginError(f"{name!r} declares no Options: the type its options are read into")
             entry = Entry(
                 name=name,
                 options_type=declared.Options,

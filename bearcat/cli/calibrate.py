@@ -74,7 +74,7 @@ def run(args) -> int:
     from bearcat.agents.ground_station.calibration import coverage, fit
     from bearcat.agents.ground_station.calibration_store import store_calibration
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import ctf_of
+    from bearcat.scenarios.cast import ctf_of, is_ctf
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.variants import vary
     from bearcat.studies.batch import run_batch
@@ -82,7 +82,7 @@ def run(args) -> int:
 
     ablate = sorted(set(args.ablate))
     scenario = vary(load_scenario(args.scenario), {"guidance.ablate": ablate} if ablate else {})
-    if scenario.game != "ctf":
+    if not is_ctf(scenario):
         raise arguments.UsageError(
             f"{scenario.source}: calibrated guidance is for capture-the-flag, not {scenario.game}"
         )

@@ -24,8 +24,8 @@ from bearcat.cli.output import Output
 def register(commands: Commands) -> None:
     p = commands.add_parser(
         "plugins",
-        description="List the behaviours and UAV tasking policies, built-in and installed, that scenarios may "
-        "name, or check what one names.",
+        description="List the behaviours, UAV tasking policies and games, built-in and installed, that "
+        "scenarios may name, or check what one names.",
     )
     verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     listing = verbs.add_parser("list", help="every registered plug-in, with where it comes from")
@@ -74,9 +74,9 @@ def run_check(args) -> int:
 
     scenario = load_scenario(args.scenario)
     out = Output(args.json)
+    found: list[dict[str, object]] = [_made_game(scenario, out)]
     named = [(a.id, "behaviour", scenario.behaviour_of(a.id), a.id, "behaviour") for a in scenario.agents]
     named += [(u.id, "tasking policy", scenario.tasking_of(u.id), TASKER, "tasking") for u in scenario.uavs]
-    found: list[dict[str, object]] = []
     for who, kind, chosen, drawer, purpose in named:
         row: dict[str, object] = {
             "for": who,
@@ -96,3 +96,24 @@ def run_check(args) -> int:
         out.say(f"{who}: {kind} {row['name']} [{row['origin']}] with {row['options']}: {state}")
     out.json(found)
     return 0 if all(row["made"] for row in found) else 1
+
+
+def _made_game(scenario, out: Output) -> dict[str, object]:
+    """The scenario's game, made as a ground station makes it (which also checks it against the scenario)."""
+    entry = scenario.game_entry
+    row: dict[str, object] = {
+        "for": "scenario",
+        "kind": "game",
+        "name": entry.name,
+        "origin": entry.origin,
+        "options": msgspec.to_builtins(scenario.rules),
+        "made": True,
+    }
+    try:
+        entry.factory(scenario)
+    except Exception as exc:
+        row["made"] = False
+        row["error"] = f"{type(exc).__name__}: {exc}"
+    state = "loads" if row["made"] else f"FAILS to be made: {row['error']}"
+    out.say(f"scenario: game {entry.name} [{entry.origin}] with its rules {row['options']}: {state}")
+    return row

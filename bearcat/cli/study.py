@@ -185,7 +185,7 @@ def uncalibrated(tasks) -> list[str]:
     from bearcat.agents.ground_station.calibration_store import calibrate_command, load_calibration
     from bearcat.agents.ground_station.tracker import TRACKER_ABLATIONS
     from bearcat.netem.profiles import load_profile
-    from bearcat.scenarios.cast import ctf_of
+    from bearcat.scenarios.cast import ctf_of, is_ctf
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.variants import vary
 
@@ -193,7 +193,7 @@ def uncalibrated(tasks) -> list[str]:
     wanted: dict[tuple, Scenario] = {}
     for name, netem, changes in sorted(cells, key=str):
         scenario = vary(load_scenario(name), json.loads(changes))
-        calibrated = scenario.game == "ctf" and scenario.uncertainty_of(scenario.team("attacker")[0]) == "calibrated"
+        calibrated = is_ctf(scenario) and scenario.uncertainty_of(scenario.team("attacker")[0]) == "calibrated"
         if calibrated and "calibration" not in scenario.ablate:
             tracker = tuple(sorted(set(scenario.ablate) & set(TRACKER_ABLATIONS)))
             wanted.setdefault((name, netem, tracker), scenario)

@@ -36,7 +36,7 @@ from collections.abc import Callable
 from contextlib import closing
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from bearcat.agents.ground_station.ctf_cache import cached
 from bearcat.agents.ground_station.event_log import EventLog
@@ -55,6 +55,9 @@ from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, s
 from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
 from bearcat.scenarios.schema import ScenarioError
 from bearcat.solvers.ctf.queries import CtfQueries
+
+if TYPE_CHECKING:
+    from bearcat.runtime.world import World
 
 log = logging.getLogger(__name__)
 
@@ -288,24 +291,21 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
     vehicle's telemetry is the truth. A ``provisional`` ground station whose
     sets are not cached answers from coarser ones and takes its own up once
     they are (``bearcat run`` solves them meanwhile)."""
-    import shapely
-
     from bearcat.bus.identity import Credentials
     from bearcat.bus.zenoh_session import ZenohSession, best_effort_endpoint, config
     from bearcat.netem.models import LinkModel
-    from bearcat.netem.profiles import load_profile
+    from bearcat.runtime.world import world_of
     from bearcat.scenarios.faults import load_faults
 
-    profile = load_profile(spec.netem or scenario.netem)
-    seed = scenario.seed if spec.seed is None else spec.seed
-    transport = spec.transport or scenario.transport
-    plan = scenario.faults if spec.faults is None else load_faults(Path(spec.faults), scenario)
+    plan = None if spec.faults is None else load_faults(Path(spec.faults), scenario)
+    world = world_of(scenario, seed=spec.seed, netem=spec.netem, transport=spec.transport, plan=plan)
+    transport, plan = world.transport, world.plan
     out = spec.out
     lease_ms = round(1000 * scenario.lease)
     builder = _BUILDERS.get(spec.role)
     if builder is None:
         raise BusError(f"role {spec.role!r} cannot be started as a peer; start ground-station, walker, phone or uav")
-    cast = builder(spec, scenario, profile, seed)
+    cast = builder(spec, world)
     agents, name, players = cast.agents, spec.name, cast.players
     if spec.resume and out is not None:
         from bearcat.runtime.recovery import last_sent
@@ -317,7 +317,6 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
             last = last_sent(run_wide, sender=name, kinds=BODILESS) | last
         for agent in agents:
             take_up(agent, last, scenario.name)
-    zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
     positions: dict[str, tuple[float, float]] = {}
     credentials = None if spec.certs is None else Credentials(Path(spec.certs), name)
     connect, listen, mode = list(spec.connect), None if spec.listen is None else list(spec.listen), spec.mode
@@ -354,7 +353,7 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
             geojson = dumps(scenario.map, units="metres").encode()
             session.serve(keys.map_query(scenario.name), lambda: geojson)
             session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
-        if zones is not None:
+        if world.zones is not None:
             # Dead zones need the position of each end of a link, which in
             # simulation the truth tells: a player's peer needs only its own
             # (the ground station's end stands still), the ground station every one.
@@ -367,16 +366,12 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
             session.subscribe(
                 keys.every(scenario.name, "truth") if every else keys.truth(scenario.name, name), on_truth
             )
-        shim = Shim(
-            profile.link if spec.network == "shim" else LinkModel(),
-            seed,
-            dead_zones=zones,
-            where=positions.get if zones is not None else None,
-            record=record.impaired,
-            colocated=(*GROUND_AGENTS, LAUNCHER),
+        shim = world.shim(
+            record.impaired,
+            positions.get,
+            (*GROUND_AGENTS, LAUNCHER),
+            link=None if spec.network == "shim" else LinkModel(),
             epoch=None,
-            transport=transport,
-            lease=scenario.lease,
         )
         keyboard = [
             a for a in agents if isinstance(a, HumanAgent) and TAKES_KEYS in a.traits and a.behaviour is not None
@@ -430,49 +425,35 @@ def _known(scenario, agent: str, ids, what: str) -> None:
         )
 
 
-def _ground_station(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
-    from bearcat.scenarios.cast import build_cast
-
-    players = build_cast(
-        scenario, profile, seed, people=[], ground=True, judge=spec.judge, provisional=spec.provisional
-    )
+def _ground_station(spec: PeerSpec, world: World) -> _Cast:
+    players = world.cast(people=[], ground=True, judge=spec.judge, provisional=spec.provisional)
     assert players.guidance is not None  # a cast with its ground station
     return _Cast(players.ground, players)
 
 
-def _uav(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
+def _uav(spec: PeerSpec, world: World) -> _Cast:
     from bearcat.agents.uav.autopilot import MavsdkAutopilot
-    from bearcat.scenarios.cast import build_cast
 
-    _known(scenario, spec.id, [u.id for u in scenario.uavs], "UAV")
+    _known(world.scenario, spec.id, [u.id for u in world.scenario.uavs], "UAV")
     if not spec.vehicle:
         raise BusError("a UAV peer needs --vehicle URL, the MAVLink address of its vehicle")
     autopilot = MavsdkAutopilot(spec.vehicle, sysid=spec.sysid)
-    players = build_cast(
-        scenario,
-        profile,
-        seed,
-        people=[],
-        uavs=[spec.id],
-        ground=False,
-        autopilots={spec.id: autopilot},
-        uav_truth=spec.emulated,
+    players = world.cast(
+        people=[], uavs=[spec.id], ground=False, autopilots={spec.id: autopilot}, uav_truth=spec.emulated
     )
     return _Cast([players.uavs[spec.id]], players, autopilot)
 
 
-def _phone(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
+def _phone(spec: PeerSpec, world: World) -> _Cast:
     from bearcat.agents.human.page_phone import PagePhone
 
-    _known(scenario, spec.id, scenario.ids, "agent")
-    return _Cast([PagePhone(scenario.name, spec.id, scenario.map)])
+    _known(world.scenario, spec.id, world.scenario.ids, "agent")
+    return _Cast([PagePhone(world.scenario.name, spec.id, world.scenario.map)])
 
 
-def _walker(spec: PeerSpec, scenario, profile, seed: int) -> _Cast:
-    from bearcat.scenarios.cast import build_cast
-
-    _known(scenario, spec.id, scenario.ids, "agent")
-    players = build_cast(scenario, profile, seed, people=[spec.id], ground=False, clock=time.perf_counter)
+def _walker(spec: PeerSpec, world: World) -> _Cast:
+    _known(world.scenario, spec.id, world.scenario.ids, "agent")
+    players = world.cast(people=[spec.id], ground=False, clock=time.perf_counter)
     return _Cast([players.people[spec.id]], players)
 
 

@@ -19,7 +19,6 @@ import logging
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import shapely
 import simpy
 
 from bearcat.agents.ground_station.event_log import EventLog
@@ -27,11 +26,10 @@ from bearcat.bus import keys
 from bearcat.bus.codec import Inbox, encode
 from bearcat.bus.inprocess import InProcessBus
 from bearcat.bus.messages import Control, GameState
-from bearcat.netem.profiles import load_profile
-from bearcat.netem.shim import Shim
 from bearcat.runtime.dispatch import Dispatcher
 from bearcat.runtime.simulated_faults import SimulatedFaults
-from bearcat.scenarios.cast import Cast, build_cast
+from bearcat.runtime.world import world_of
+from bearcat.scenarios.cast import Cast
 from bearcat.scenarios.faults import GROUND, LAUNCHER, FaultError, refusal
 from bearcat.scenarios.schema import Scenario
 
@@ -85,32 +83,20 @@ def simulate(
     wrapped). ``netem`` and ``transport`` play it on another network than
     the scenario's. ``faults`` is the fault plan to apply instead of the
     scenario's own."""
-    seed = scenario.seed if seed is None else int(seed)
-    profile = load_profile(netem or scenario.netem)
-    plan = scenario.faults if faults is None else tuple(faults)
+    world = world_of(scenario, seed=seed, netem=netem, transport=transport, plan=faults)
+    seed, profile, plan = world.seed, world.profile, world.plan
     if (why := refusal(plan, "simulate")) is not None:
         raise FaultError(why)
     if players is None:
-        players = build_cast(scenario, profile, seed, ctf_progress=ctf_progress)
+        players = world.cast(ctf_progress=ctf_progress)
     env = simpy.Environment()
     record = EventLog(events)
-    zones = shapely.union_all([shapely.Polygon(z) for z in scenario.dead_zones]) if scenario.dead_zones else None
 
     def where(peer: str):
         person = players.people.get(peer)
         return None if person is None else tuple(person.walker.position)
 
-    ground = (*(a.name for a in players.ground), LAUNCHER)
-    shim = Shim(
-        profile.link,
-        seed,
-        dead_zones=zones,
-        where=where if zones is not None else None,
-        record=record.impaired,
-        colocated=ground,
-        transport=transport or scenario.transport,
-        lease=scenario.lease,
-    )
+    shim = world.shim(record.impaired, where, (*(a.name for a in players.ground), LAUNCHER))
 
     def arrive(call, payload):
         return lambda _event: call(payload)
@@ -192,12 +178,11 @@ def simulate(
         """The agents of ``peer`` built afresh, as a restarted process builds them;
         a UAV's vehicle flies on through its peer's restart."""
         if peer == GROUND:
-            return build_cast(scenario, profile, seed, people=[], ground=True).ground
+            return world.cast(people=[], ground=True).ground
         if peer in players.uavs:
             pilots = {peer: old[0].autopilot}
-            cast = build_cast(scenario, profile, seed, people=[], uavs=[peer], ground=False, autopilots=pilots)
-            return list(cast.uavs.values())
-        return list(build_cast(scenario, profile, seed, people=[peer], ground=False).people.values())
+            return list(world.cast(people=[], uavs=[peer], ground=False, autopilots=pilots).uavs.values())
+        return list(world.cast(people=[peer], ground=False).people.values())
 
     injector = None
     if plan:
@@ -218,7 +203,7 @@ def simulate(
         env.process(ticker(agent))
     if inspect is not None:
         env.process(inspector())
-    if zones is not None or plan:
+    if world.zones is not None or plan:
         env.process(poller())
     start = Control(t=0.0, command="start", seq=1)
     record.sent(0.0, LAUNCHER, keys.control(scenario.name), start)
@@ -230,7 +215,7 @@ def simulate(
         scenario=scenario.name,
         seed=seed,
         netem=profile.name,
-        transport=transport or scenario.transport,
+        transport=world.transport,
         winner=state.winner if state else None,
         reason=state.reason
         if state

@@ -46,7 +46,8 @@ from bearcat.agents.uav.airframe import Airframe
 from bearcat.agents.uav.autopilot import SimulatedAutopilot
 from bearcat.maps.ctf_rules import default_rules, provisional_grid, unresolved_capture
 from bearcat.netem.profiles import Profile
-from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
+from bearcat.scenarios.game import Game
+from bearcat.scenarios.schema import UNCERTAINTIES, CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
 from bearcat.solvers.ctf.queries import CtfQueries
 
 log = logging.getLogger(__name__)
@@ -79,13 +80,13 @@ def awaited_sets(scenario: Scenario) -> AwaitedSets | None:
     now would wait for; None where it would start on its own (they are
     cached, or its grid is coarse enough already) or its game solves none.
     Solves nothing, but refuses a scenario its ground station would."""
-    return _CtfGame(scenario, provisional=True).awaiting() if scenario.game == "ctf" else None
+    return _CtfGame(scenario, provisional=True).awaiting() if is_ctf(scenario) else None
 
 
 def unsolved(scenario: Scenario) -> bool:
     """Whether ``scenario`` is a capture-the-flag game whose own sets are not
     in the cache yet: its first run, on a fresh clone perhaps."""
-    if scenario.game != "ctf":
+    if not is_ctf(scenario):
         return False
     game = _CtfGame(scenario)
     return not stored(game.own(), game.table.stages)
@@ -149,11 +150,7 @@ def build_cast(
     the other games solve in well under a second and ignore it. ``clock``
     is what the people's behaviours are held to their budget on (live runs:
     the wall clock; None, in simulation: no budget, see ``agents.guard``)."""
-    if scenario.game not in GAMES:
-        raise ScenarioError(
-            f"{scenario.source}: running {scenario.game} games is not supported yet; {' and '.join(GAMES)} are"
-        )
-    game = GAMES[scenario.game](scenario, provisional=provisional, seed=seed, clock=clock)
+    game = scenario.game_entry.factory(scenario, provisional=provisional, seed=seed, clock=clock)
     if scenario.uavs and not isinstance(game, _CtfGame):
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")
     chosen = scenario.ids if people is None else list(people)
@@ -181,9 +178,15 @@ def build_cast(
 
 def ctf_of(scenario: Scenario) -> _CtfGame:
     """The capture-the-flag game of ``scenario`` as its ground station sets it up."""
-    if scenario.game != "ctf":
+    if not is_ctf(scenario):
         raise ScenarioError(f"{scenario.source}: this needs a capture-the-flag game, not {scenario.game}")
     return _CtfGame(scenario)
+
+
+def is_ctf(scenario: Scenario) -> bool:
+    """Whether ``scenario`` plays the built-in capture-the-flag game, whose
+    sets are solved ahead, cached and calibrated."""
+    return scenario.game_entry.factory is _CtfGame
 
 
 def simulated_autopilot(scenario: Scenario, spec, seed: int) -> SimulatedAutopilot:
@@ -202,8 +205,12 @@ def _uav_spec(scenario: Scenario, uav: str):
     )
 
 
-class _CtfGame:
-    """Capture-the-flag as the scenario sets it up (thesis 3.1.1, 3.5)."""
+class _CtfGame(Game):
+    """Capture-the-flag, 1 vs 1, with a flag and a return region (thesis 3.1.1, 3.5)."""
+
+    Options = CtfRules
+    teams = ("attacker", "defender")
+    uncertainties = UNCERTAINTIES
 
     def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
         attackers, defenders = scenario.team("attacker"), scenario.team("defender")
@@ -411,11 +418,15 @@ class _CtfGame:
         )
 
 
-class _PursuitGame:
-    """Cooperative pursuit in a convex field, as in the experiments of thesis
-    5.4: pursuers see the evader's safe-reachable set and their heading; the
+class _PursuitGame(Game):
+    """Cooperative pursuit in a convex field: the pursuers capture the evader, or it lasts (thesis 5.4).
+
+    Pursuers see the evader's safe-reachable set and their heading; the
     pursuers win by capture, the evader by lasting the time limit."""
 
+    Options = PursuitRules
+    teams = ("evader", "pursuer")
+    uncertainties = ("none",)
     awaited = None
 
     def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
@@ -457,11 +468,14 @@ class _PursuitGame:
         return _person(self.scenario, spec, profile, seed, situation, {}, "capture", clock=clock)
 
 
-class _ReachAvoidGame:
-    """The open-loop reach-avoid game of thesis ch. 4 played out: one attacker
-    must reach the targets in turn; the defenders win by capture or when
-    time runs out."""
+class _ReachAvoidGame(Game):
+    """Open-loop reach-avoid: one attacker reaches the targets in turn past many defenders (thesis 4).
 
+    The defenders win by capture or when time runs out."""
+
+    Options = ReachAvoidRules
+    teams = ("attacker", "defender")
+    uncertainties = ("none", "worst-case")
     awaited = None
 
     def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
@@ -548,11 +562,8 @@ def _uncertainty(scenario: Scenario) -> Uncertainty:
     return Uncertainty(speeds, scenario.guidance_confidence)
 
 
-GAMES: dict[str, type[_CtfGame] | type[_PursuitGame] | type[_ReachAvoidGame]] = {
-    "ctf": _CtfGame,
-    "pursuit": _PursuitGame,
-    "reach-avoid": _ReachAvoidGame,
-}
+BUILTINS: dict[str, type] = {"ctf": _CtfGame, "reach-avoid": _ReachAvoidGame, "pursuit": _PursuitGame}
+"""The built-in entries of ``game.GAMES``, by the names scenarios give them."""
 
 
 def _rules_of(scenario: Scenario, kind: type[_Rules]) -> _Rules:

@@ -7,7 +7,7 @@ whether their phone shows reachability guidance::
     [scenario]
     name = "fake-out"
     map = "field-50"
-    game = "ctf"                 # ctf | reach-avoid | pursuit
+    game = "ctf"                 # ctf | reach-avoid | pursuit | a game of one's own (scenarios.game)
     time_limit = 60.0            # s of game time
     netem = "wifi"               # a profile of netem/profiles.toml
     transport = "tcp"            # live runs: fixes and guidance over tcp (retransmitted) or udp (lost)
@@ -53,6 +53,7 @@ the file and the key path, list indices counted from 0, such as
 from __future__ import annotations
 
 import tomllib
+import typing
 from dataclasses import dataclass, field
 from importlib import resources
 from pathlib import Path
@@ -73,16 +74,10 @@ from bearcat.maps import Map, MapError, load_map
 from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
 from bearcat.scenarios.faults import Fault, check_faults
+from bearcat.scenarios.game import GAMES, Game
 from bearcat.solvers.levelset.devices import DEVICES
 from bearcat.validation import Invalid, convert, not_one_of
 
-Game = Literal["ctf", "reach-avoid", "pursuit"]
-Team = Literal["attacker", "defender", "evader", "pursuer"]
-TEAMS: dict[Game, tuple[Team, Team]] = {
-    "ctf": ("attacker", "defender"),
-    "reach-avoid": ("attacker", "defender"),
-    "pursuit": ("evader", "pursuer"),
-}
 MAX_CELLS = 2000
 """Most cells across the map that ``rules.spacing`` may ask of the fast-marching grid."""
 
@@ -99,12 +94,6 @@ UNCERTAINTIES: tuple[Uncertainty, ...] = get_args(Uncertainty)
 against every place the disks round the fixes allow; ``calibrated`` where a
 tracker predicts the players are now, with a margin measured on simulated
 games (``bearcat calibrate``)."""
-GAME_UNCERTAINTIES: dict[Game, tuple[Uncertainty, ...]] = {
-    "ctf": UNCERTAINTIES,
-    "reach-avoid": ("none", "worst-case"),
-    "pursuit": ("none",),
-}
-"""The forms each game's guidance has; the last is a scenario's default."""
 Ablation = Literal["prediction", "bias", "manoeuvre", "calibration", "belief"]
 ABLATIONS: tuple[Ablation, ...] = get_args(Ablation)
 """Parts of calibrated guidance a study may switch off, to measure what each
@@ -151,7 +140,7 @@ class AgentSpec(_Table, frozen=True):
     how their phone guides them."""
 
     id: Name
-    team: Team
+    team: Name  # one of its game's two teams
     start: Point
     speed: WalkingSpeed
     behaviour: PluginName
@@ -180,7 +169,7 @@ class UavSpec(_Table, frozen=True):
     it, and what it does when it loses the ground station."""
 
     id: Name
-    team: Team
+    team: Name  # one of its game's two teams
     start: Point
     altitude: Annotated[float, Meta(gt=0.0, le=500.0, extra={"unit": "m"})] = 20.0
     camera_radius: Radius = 15.0
@@ -230,16 +219,13 @@ class PursuitRules(_Table, frozen=True):
     strategy: Literal["area", "pure"] = "area"
 
 
-RULES = {"ctf": CtfRules, "reach-avoid": ReachAvoidRules, "pursuit": PursuitRules}
-
-
 # ---------------------------------------------------------------- the file
 
 
 class ScenarioTable(_Table, frozen=True):
     name: Name  # names the game on the bus
     map: Annotated[str, Meta(min_length=1)]
-    game: Game
+    game: PluginName  # a plug-in of GAMES: ctf, reach-avoid, pursuit, or one's own
     time_limit: Annotated[float, Meta(gt=0.0, le=86400.0, extra={"unit": "s"})]
     description: str = ""
     netem: ProfileName = "ideal"
@@ -255,8 +241,8 @@ class ScenarioTable(_Table, frozen=True):
 class GuidanceTable(_Table, frozen=True):
     rate: Rate = 10.0
     # How answers treat stale, noisy fixes (UNCERTAINTIES); None: the best
-    # form the game has (GAME_UNCERTAINTIES): calibrated for capture-the-flag,
-    # worst-case for reach-avoid, none for pursuit.
+    # form the game has (its class's uncertainties): calibrated for
+    # capture-the-flag, worst-case for reach-avoid, none for pursuit.
     uncertainty: Uncertainty | None = None
     # worst-case: the share of a fix's GPS error the disks hold (the radius
     # of its 95 % circle by default); 0: only how far an agent may have
@@ -292,7 +278,7 @@ class Scenario:
     netem: str
     transport: str  # how best-effort messages travel in live runs: "tcp" or "udp"
     seed: int
-    rules: CtfRules | ReachAvoidRules | PursuitRules
+    rules: msgspec.Struct  # read into its game's rules type (game_entry.options_type)
     guidance_rate: float
     uncertainty: str  # the scenario's guidance.uncertainty, its game's default filled in
     guidance_confidence: float
@@ -301,6 +287,7 @@ class Scenario:
     text: str  # the TOML it was read from, served to peers that ask
     dead_zones: tuple[tuple[tuple[float, float], ...], ...]
     uavs: tuple[UavSpec, ...]
+    game_entry: Entry  # the game's entry of GAMES, whose factory makes it (cast.build_cast)
     lease: float = 10.0  # s a silent peer's liveliness outlives it
     faults: tuple = ()  # the scenario's own fault plan (scenarios.faults)
     alpha: float = 0.01  # calibrated: the false-go share the margin allows
@@ -388,7 +375,12 @@ def parse_scenario(
         _check_renamed(data)
         file = convert(data, ScenarioFile)
         head = file.scenario
-        rules = convert(file.rules, RULES[head.game], at="rules")
+        try:
+            game = GAMES.get(head.game, directory)
+        except PluginError as exc:
+            raise Invalid("scenario.game", str(exc)) from None
+        rules = convert(file.rules, game.options_type, at="rules")
+        declared = typing.cast(type[Game], game.factory)
         if game_map is None:
             try:
                 game_map = load_map(head.map)
@@ -396,7 +388,8 @@ def parse_scenario(
                 raise Invalid("scenario.map", str(exc)) from None
         behaviours = _plugged(BEHAVIOURS, "agent", [(a.id, a.behaviour, a.options) for a in file.agent], directory)
         tasking = _plugged(TASKING, "uav", [(u.id, u.search, u.search_options) for u in file.uav], directory)
-        _check_against(file, rules, game_map, behaviours)
+        _check_against(file, rules, game_map, behaviours, declared.teams)
+        _check_uncertainty(file, declared.uncertainties)
         text = _located(text, data, directory)
     except (Invalid, MapError) as exc:
         raise ScenarioError(f"{source}: {exc}") from None
@@ -411,7 +404,7 @@ def parse_scenario(
         seed=head.seed,
         rules=rules,
         guidance_rate=file.guidance.rate,
-        uncertainty=file.guidance.uncertainty or GAME_UNCERTAINTIES[head.game][-1],
+        uncertainty=file.guidance.uncertainty or declared.uncertainties[-1],
         guidance_confidence=file.guidance.confidence,
         alpha=file.guidance.alpha,
         defender_quantile=file.guidance.defender_quantile,
@@ -423,6 +416,7 @@ def parse_scenario(
         uavs=file.uav,
         lease=head.lease,
         faults=file.fault,
+        game_entry=game,
         behaviours=behaviours,
         tasking=tasking,
         directory=directory,
@@ -434,7 +428,8 @@ def _located(text: str, data: dict, directory: Path | None) -> str:
     folder, the same scenario naming that file by its absolute path: the
     text a run keeps and serves, which its peers and checker read from
     other folders."""
-    named = [(agent, "behaviour") for agent in data["agent"]] + [(uav, "search") for uav in data.get("uav", ())]
+    named = [(data["scenario"], "game")] + [(agent, "behaviour") for agent in data["agent"]]
+    named += [(uav, "search") for uav in data.get("uav", ())]
     relative = [
         (table, key)
         for table, key in named
@@ -465,10 +460,9 @@ def _plugged(registry: Registry, kind: str, named, directory: Path | None) -> di
     return chosen
 
 
-def _check_uncertainty(file: ScenarioFile) -> None:
-    """Each agent's guidance asks only for a form its game's guidance has."""
+def _check_uncertainty(file: ScenarioFile, offered: tuple[str, ...]) -> None:
+    """Each agent's guidance asks only for a form its game's guidance has (``offered``)."""
     game = file.scenario.game
-    offered = GAME_UNCERTAINTIES[game]
     asked = [("guidance.uncertainty", file.guidance.uncertainty)]
     asked += [(f"agent[{k}].uncertainty", agent.uncertainty) for k, agent in enumerate(file.agent)]
     for path, form in asked:
@@ -488,10 +482,11 @@ def _check_renamed(data: dict) -> None:
             raise Invalid(f"agent[{k}].robust", replaced.format(f"agent[{k}]."))
 
 
-def _check_against(file: ScenarioFile, rules, game_map: Map, behaviours: dict[str, Plugged]) -> None:
+def _check_against(
+    file: ScenarioFile, rules, game_map: Map, behaviours: dict[str, Plugged], teams: tuple[str, str]
+) -> None:
     """What needs the game and the map: teams, places, regions, grid sizes, who plays."""
     game = file.scenario.game
-    teams = TEAMS[game]
     sides: list[tuple[str, str]] = [(f"agent[{k}]", a.team) for k, a in enumerate(file.agent)]
     sides += [(f"uav[{k}]", u.team) for k, u in enumerate(file.uav)]
     for where, team in sides:
@@ -526,7 +521,6 @@ def _check_against(file: ScenarioFile, rules, game_map: Map, behaviours: dict[st
         )
     committing = [a for a, chosen in behaviours.items() if chosen.entry.has(COMMITS)]
     check_faults(file.fault, file.agent, file.uav, committing)
-    _check_uncertainty(file)
     ids = [a.id for a in file.agent] + [u.id for u in file.uav]
     twice = sorted({i for i in ids if ids.count(i) > 1})
     if twice:

@@ -298,9 +298,9 @@ def game_row(task: dict, scenario, outcome, events) -> dict:
 def _true_value(scenario, events: str, t: float) -> float | None:
     """The capture-the-flag value at the players' true positions at time ``t``."""
     from bearcat.agents.ground_station.event_log import read_events
-    from bearcat.scenarios.cast import _CtfGame
+    from bearcat.scenarios.cast import _CtfGame, is_ctf
 
-    if scenario.game != "ctf":
+    if not is_ctf(scenario):
         return None
     where = {}
     for e in read_events(events):

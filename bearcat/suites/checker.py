@@ -551,6 +551,5 @@ def _swept(a: np.ndarray, b: np.ndarray) -> float:
 
 def _contest(scenario):
     """What the referee of ``scenario`` judged by: radius, targets, forbidden regions."""
-    from bearcat.scenarios.cast import GAMES
 
-    return GAMES[scenario.game](scenario).referee().contest
+    return scenario.game_entry.factory(scenario).referee().contest
