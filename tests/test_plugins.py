@@ -535,3 +535,49 @@ def test_the_pytest_plugins_fixtures_play_the_docs_class_under_a_fault_plan(fold
     run.assert_held()
     assert run.outcome["ended"] and [f["kind"] for f in run.outcome["faults"]] == ["pause"]
     assert run.held("plugins") is True
+
+
+# ---------------------------------------------------------------- games
+
+KEEPAWAY = '''
+import dataclasses
+
+from bearcat.plugins import GAMES
+
+Pursuit = GAMES.get("pursuit").factory
+
+
+class Keepaway(Pursuit):
+    """Pursuit whose rules also say how long the evader must last, which this game takes as its time limit."""
+
+    class Options(Pursuit.Options, frozen=True):
+        last: float = 15.0
+
+    def __init__(self, scenario, **kw):
+        super().__init__(scenario, **kw)
+        self.lasting = self.table.last
+
+    def referee(self, on_truth=True):
+        made = super().referee(on_truth)
+        made.contest = dataclasses.replace(made.contest, time_limit=self.lasting)
+        return made
+'''
+
+
+def test_a_game_of_ones_own_reads_its_rules_and_plays(tmp_path):
+    """A game is found as any plug-in is: its rules type reads the scenario's
+    ``[rules]`` (a key the built-in's has not, refused by the built-in), and
+    the game it makes is the one played."""
+    (tmp_path / "keepaway.py").write_text(KEEPAWAY)
+    text = (ROOT / "bearcat" / "scenarios" / "data" / "pursuit-field.toml").read_text()
+    text = text.replace('game = "pursuit"', 'game = "keepaway.py:Keepaway"').replace(
+        "capture_radius = 2.0", "capture_radius = 2.0\nlast = 12.0"
+    )
+    scenario = parse_scenario(text, directory=tmp_path)
+    assert scenario.game_entry.name == "keepaway.py:Keepaway" and scenario.rules.last == 12.0
+    outcome = simulate(scenario)
+    assert outcome.ended and outcome.elapsed <= 12.0 + 0.2, outcome  # the game's own limit, not the scenario's 120 s
+    with pytest.raises(ScenarioError, match=r"rules: unknown key 'last'; the keys there are capture_radius"):
+        parse_scenario(text.replace('game = "keepaway.py:Keepaway"', 'game = "pursuit"'))
+    with pytest.raises(ScenarioError, match=r"scenario.game: there is no game 'keepaway'; the games are ctf, "):
+        parse_scenario(text.replace('game = "keepaway.py:Keepaway"', 'game = "keepaway"'))
