@@ -15,6 +15,8 @@ plug-in's factory fails.
 
 from __future__ import annotations
 
+import functools
+
 import msgspec
 
 from bearcat.cli.arguments import Commands
@@ -74,46 +76,32 @@ def run_check(args) -> int:
 
     scenario = load_scenario(args.scenario)
     out = Output(args.json)
-    found: list[dict[str, object]] = [_made_game(scenario, out)]
-    named = [(a.id, "behaviour", scenario.behaviour_of(a.id), a.id, "behaviour") for a in scenario.agents]
-    named += [(u.id, "tasking policy", scenario.tasking_of(u.id), TASKER, "tasking") for u in scenario.uavs]
-    for who, kind, chosen, drawer, purpose in named:
-        row: dict[str, object] = {
-            "for": who,
-            "kind": kind,
-            "name": chosen.entry.name,
-            "origin": chosen.entry.origin,
-            "options": msgspec.to_builtins(chosen.options),
-            "made": True,
-        }
-        try:
-            chosen.entry.factory(chosen.options, stream(scenario.seed, drawer, purpose))
-        except Exception as exc:
-            row["made"] = False
-            row["error"] = f"{type(exc).__name__}: {exc}"
-        found.append(row)
-        state = "loads" if row["made"] else f"FAILS to be made: {row['error']}"
-        out.say(f"{who}: {kind} {row['name']} [{row['origin']}] with {row['options']}: {state}")
+    game = scenario.game_entry
+    found = [_made(out, "scenario", "game", game, scenario.rules, lambda: game.factory(scenario), "its rules ")]
+    plugged = [(a.id, "behaviour", scenario.behaviour_of(a.id), a.id, "behaviour") for a in scenario.agents]
+    plugged += [(u.id, "tasking policy", scenario.tasking_of(u.id), TASKER, "tasking") for u in scenario.uavs]
+    for who, kind, chosen, drawer, purpose in plugged:
+        make = functools.partial(chosen.entry.factory, chosen.options, stream(scenario.seed, drawer, purpose))
+        found.append(_made(out, who, kind, chosen.entry, chosen.options, make))
     out.json(found)
     return 0 if all(row["made"] for row in found) else 1
 
 
-def _made_game(scenario, out: Output) -> dict[str, object]:
-    """The scenario's game, made as a ground station makes it (which also checks it against the scenario)."""
-    entry = scenario.game_entry
+def _made(out: Output, who: str, kind: str, entry, options, make, said: str = "") -> dict[str, object]:
+    """``entry`` (for ``who``, with ``options``) made once by ``make()`` as a game makes it, and what came of it."""
     row: dict[str, object] = {
-        "for": "scenario",
-        "kind": "game",
+        "for": who,
+        "kind": kind,
         "name": entry.name,
         "origin": entry.origin,
-        "options": msgspec.to_builtins(scenario.rules),
+        "options": msgspec.to_builtins(options),
         "made": True,
     }
     try:
-        entry.factory(scenario)
+        make()
     except Exception as exc:
         row["made"] = False
         row["error"] = f"{type(exc).__name__}: {exc}"
     state = "loads" if row["made"] else f"FAILS to be made: {row['error']}"
-    out.say(f"scenario: game {entry.name} [{entry.origin}] with its rules {row['options']}: {state}")
+    out.say(f"{who}: {kind} {entry.name} [{entry.origin}] with {said}{row['options']}: {state}")
     return row
