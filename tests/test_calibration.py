@@ -162,7 +162,7 @@ def test_ablations_switch_off_the_calibration_and_the_defenders_belief(field_gam
     tracker's own even though a calibration is there, and the note says it
     was switched off; with ``belief`` the defender steers by the plain
     heading at the prediction and its value is the plain one there."""
-    from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor, Estimate, _standing
+    from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor, Estimate
     from bearcat.maps import load_map
 
     game_map = load_map("field-50")
@@ -172,10 +172,9 @@ def test_ablations_switch_off_the_calibration_and_the_defenders_belief(field_gam
     estimate = Estimate(0.0, _standing(a, 2.0), _standing(d, 2.0), 0.2)
 
     def advisor(*ablate):
-        methods = {"attacker": "calibrated", "defender": "calibrated"}
         return CtfAdvisor(
-            game_map, field_game, attacker="attacker", defender="defender", phase="return", methods=methods,
-            calibration=None if "calibration" in ablate else calibration, alpha=0.05, ablate=ablate,
+            game_map, field_game, attacker="attacker", defender="defender", phase="return",
+            calibration=lambda: calibration, alpha=0.05, ablate=ablate,
         )  # fmt: skip
 
     full, uncalibrated = advisor().calibrated_answer("attacker", estimate), advisor("calibration")
@@ -224,7 +223,7 @@ def test_a_calibrated_game_sends_predictions_and_margins_and_its_replay_reproduc
     from bearcat.scenarios.schema import load_scenario
     from bearcat.studies.calibration import replay_scores
 
-    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, uncertainty="calibrated")
+    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, method="calibrated")
     scenario = load_scenario(path)
     assert main(["simulate", str(path), "--seed", "2", "--out", str(tmp_path / "out")]) == 0
     run = tmp_path / "out" / "seed-2"
@@ -260,7 +259,7 @@ def test_calibrate_fits_checks_and_stores_a_calibration_the_ground_station_then_
     from bearcat.scenarios.cast import ctf_of
     from bearcat.scenarios.schema import load_scenario
 
-    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, uncertainty="calibrated")
+    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, method="calibrated")
     out = tmp_path / "calibration"
     words = ("calibrate", str(path), "--trials", "12", "--holdout", "4", "--seed", "500", "--alpha", "0.1")
     run = _bearcat(*words, "--workers", "2", "--out", str(out), "--json")
@@ -304,3 +303,22 @@ def test_calibrate_refuses_a_game_without_calibrated_guidance_in_one_sentence():
     run = _bearcat("calibrate", "pursuit-field", "--trials", "1", "--holdout", "1")
     assert run.returncode == 2
     assert run.stderr.strip().splitlines()[-1].endswith("calibrated guidance is for capture-the-flag, not pursuit")
+
+
+def _standing(where: np.ndarray, spread: float):
+    """A belief of a player standing at ``where``, ``spread`` metres wide."""
+    from bearcat.agents.ground_station.tracker import Belief
+
+    covariance = np.diag([spread**2, spread**2, 0.01, 0.01])
+    return Belief(
+        t=0.0,
+        position=where,
+        velocity=np.zeros(2),
+        covariance=covariance,
+        manoeuvre=0.0,
+        bias=np.zeros(2),
+        bias_covariance=np.eye(2),
+        weights=np.array([1.0]),
+        means=np.concatenate([where, np.zeros(2)])[None],
+        covariances=covariance[None],
+    )

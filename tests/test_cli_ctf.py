@@ -128,7 +128,7 @@ def test_query_robust_answers_hold_for_the_disks_the_fixes_allow(cache, tmp_path
     state = ("--stages", "all", "--phase", "return", "--attacker", "5,5", "--defender", "3,7")
 
     def query(*extra):
-        run = bearcat("query", "ctf", *GAME, *state, "--uncertainty", "worst-case", *extra, "--json", cache=cache)
+        run = bearcat("query", "ctf", *GAME, *state, "--guidance", "worst-case", *extra, "--json", cache=cache)
         assert run.returncode == 0, run.stderr
         return json.loads(run.stdout)
 

@@ -12,8 +12,11 @@ from scipy import ndimage
 
 from bearcat.agents.ground_station.guidance import CtfAdvisor, GuidanceService, PursuitAdvisor, ReachAvoidAdvisor
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty
+from bearcat.agents.ground_station.guidance.methods import WorstCase
 from bearcat.agents.ground_station.tracker import Trackers
+from bearcat.agents.guard import Guard
 from bearcat.agents.human.phone import Phone
+from bearcat.agents.options import NoOptions
 from bearcat.bus import keys
 from bearcat.bus.codec import decode, encode
 from bearcat.bus.messages import Fix, Guidance
@@ -22,6 +25,7 @@ from bearcat.maps.ctf import ctf_geometry
 from bearcat.netem.models import CompassError, GpsError
 from bearcat.solvers.ctf.queries import CtfQueries
 from bearcat.solvers.ctf.sets import Rules, solve_ctf
+from tests.support.answers import answering
 
 
 def fixes_at(game_map, positions):
@@ -34,14 +38,16 @@ def fixes_at(game_map, positions):
 
 def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
     campus = load_map("campus-400")
-    advisor = ReachAvoidAdvisor(
-        campus,
-        attacker="a",
-        defenders=["d1", "d2"],
-        targets=["flag", "home"],
-        speeds={"a": 5.0, "d1": 1.0, "d2": 0.5},
-        capture_radius=2.0,
-        spacing=2.0,
+    advisor = answering(
+        ReachAvoidAdvisor(
+            campus,
+            attacker="a",
+            defenders=["d1", "d2"],
+            targets=["flag", "home"],
+            speeds={"a": 5.0, "d1": 1.0, "d2": 0.5},
+            capture_radius=2.0,
+            spacing=2.0,
+        )
     )
     fixes = fixes_at(campus, {"a": (370.0, 30.0), "d1": (120.0, 150.0), "d2": (330.0, 200.0)})
     shown = advisor("a", fixes, 2.0)
@@ -55,14 +61,16 @@ def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
     assert min(abs(bearing - shown["heading"]), 360 - abs(bearing - shown["heading"])) < 30
     assert shown["region"] and shown["value"] > 0
     # Defenders fast enough to cut every path: no go, no heading.
-    fast = ReachAvoidAdvisor(
-        campus,
-        attacker="a",
-        defenders=["d1", "d2"],
-        targets=["flag", "home"],
-        speeds={"a": 5.0, "d1": 10.0, "d2": 10.0},
-        capture_radius=2.0,
-        spacing=2.0,
+    fast = answering(
+        ReachAvoidAdvisor(
+            campus,
+            attacker="a",
+            defenders=["d1", "d2"],
+            targets=["flag", "home"],
+            speeds={"a": 5.0, "d1": 10.0, "d2": 10.0},
+            capture_radius=2.0,
+            spacing=2.0,
+        )
     )
     blocked = fast("a", fixes, 2.0)
     assert blocked["go"] is False and "heading" not in blocked
@@ -70,14 +78,16 @@ def test_open_loop_guidance_follows_the_safe_path_of_the_readme_example():
 
 def test_a_fix_inside_a_building_is_answered_from_the_nearest_free_point():
     campus = load_map("campus-400")
-    advisor = ReachAvoidAdvisor(
-        campus,
-        attacker="a",
-        defenders=["d1"],
-        targets=["flag", "home"],
-        speeds={"a": 5.0, "d1": 1.0},
-        capture_radius=2.0,
-        spacing=2.0,
+    advisor = answering(
+        ReachAvoidAdvisor(
+            campus,
+            attacker="a",
+            defenders=["d1"],
+            targets=["flag", "home"],
+            speeds={"a": 5.0, "d1": 1.0},
+            capture_radius=2.0,
+            spacing=2.0,
+        )
     )
     inside = np.asarray(campus.obstacles[0].representative_point().coords[0])
     shown = advisor("a", fixes_at(campus, {"a": (370.0, 30.0), "d1": tuple(inside)}), 2.0)
@@ -122,7 +132,7 @@ def test_a_ctf_region_reads_as_lon_lat_rings_where_the_solver_puts_it():
     no node well outside it; the phone's screen shows the same region."""
     ctf10 = load_map("ctf-10")
     queries = CtfQueries(solve_ctf(ctf_geometry(ctf10, 21), Rules(), "return", scheme="first"))
-    advisor = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+    advisor = answering(CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return"))
     attacker = np.array([5.0, 3.0])
     fixes = fixes_at(ctf10, {"a": tuple(attacker), "d": (2.0, 6.0)})
     sent = sent_to("a", ctf10, fixes, advisor("a", fixes, 2.0))
@@ -150,7 +160,7 @@ def test_a_ctf_region_reads_as_lon_lat_rings_where_the_solver_puts_it():
 
 def test_a_pursuit_cell_reads_as_lon_lat_ring_of_the_area_sent_as_value():
     field = load_map("field-50")
-    advisor = PursuitAdvisor(field, evader="e", pursuers=["p1", "p2"])
+    advisor = answering(PursuitAdvisor(field, evader="e", pursuers=["p1", "p2"]))
     fixes = fixes_at(field, {"e": (25.0, 25.0), "p1": (10.0, 10.0), "p2": (40.0, 12.0)})
     sent = sent_to("p1", field, fixes, advisor("p1", fixes, 2.0))
     (ring,) = sent.region
@@ -227,10 +237,8 @@ def test_the_phone_shows_where_the_tracker_believes_each_agent_is_with_its_ellip
 
 def test_robust_advice_is_the_plain_one_for_fresh_exact_fixes_and_cautious_for_stale_ones(ctf10_game):
     ctf10, queries = ctf10_game
-    plain = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
-    robust = CtfAdvisor(
-        ctf10, queries, attacker="a", defender="d", phase="return", methods={"a": "worst-case", "d": "worst-case"}
-    )
+    advisor = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+    plain, robust = answering(advisor), answering(advisor, "worst_case")
     fixes = LatestFixes(ctf10)
     # A state the attacker barely wins: its value just below zero.
     states = [((x, y), (u, v)) for x in np.linspace(1, 9, 9) for y in np.linspace(1, 9, 9) for u, v in [(2.0, 6.0)]]
@@ -255,17 +263,19 @@ def test_a_warmed_up_advisor_answers_every_fix_as_a_fresh_one_does(ctf10_game):
     the very positions it answered, with stale fixes that grow the robust
     disks, and after the phase changes."""
     ctf10, queries = ctf10_game
-    common = dict(attacker="a", defender="d", phase="capture", methods={"a": "worst-case", "d": "worst-case"})
-    warmed, fresh = CtfAdvisor(ctf10, queries, **common), CtfAdvisor(ctf10, queries, **common)
+    common = dict(attacker="a", defender="d", phase="capture")
+    advisors = CtfAdvisor(ctf10, queries, **common), CtfAdvisor(ctf10, queries, **common)
     a, d = (2.0, 2.0), (6.0, 6.0)
-    warmed.warm_up({"a": a, "d": d})
+    methods = {agent: (WorstCase(NoOptions(), np.random.default_rng(0)), Guard(agent, "worst-case")) for agent in "ad"}
+    GuidanceService("g", ctf10, ["a", "d"], advisor=advisors[0], methods=methods).warm_up({"a": a, "d": d})
+    warmed, fresh = (answering(advisor, "worst_case") for advisor in advisors)
     fixes = LatestFixes(ctf10)
     fixes.take(fix(ctf10, "a", a, 1.0))
     fixes.take(fix(ctf10, "d", d, 1.0))
     for now in (1.0, 1.5, 3.0):
         for agent in ("a", "d"):
             assert warmed(agent, fixes, now) == fresh(agent, fixes, now)
-    for advisor in (warmed, fresh):
+    for advisor in advisors:
         advisor.phase = "return"
     assert warmed("a", fixes, 3.0) == fresh("a", fixes, 3.0)
 
@@ -275,13 +285,13 @@ def test_an_answer_after_either_player_moved_is_the_one_a_fresh_advisor_gives(ct
     while the other player moves: every answer, region included, is still
     the one an advisor that never answered before gives."""
     ctf10, queries = ctf10_game
-    advisor = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+    advisor = answering(CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return"))
     fixes = LatestFixes(ctf10)
     moves = [("a", (2.0, 2.0)), ("d", (6.0, 6.0)), ("d", (7.0, 5.0)), ("a", (3.0, 2.5)), ("d", (2.0, 6.0))]
     for t, (mover, where) in enumerate(moves, start=1):
         fixes.take(fix(ctf10, mover, where, float(t)))
         for agent in ("a", "d"):
-            fresh = CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return")
+            fresh = answering(CtfAdvisor(ctf10, queries, attacker="a", defender="d", phase="return"))
             assert advisor(agent, fixes, t + 0.5) == fresh(agent, fixes, t + 0.5)
 
 
@@ -292,9 +302,10 @@ def test_robust_open_loop_guidance_grows_each_defenders_capture_disk_by_its_unce
     campus = load_map("campus-400")
     speeds = {"a": 5.0, "d1": 1.0, "d2": 0.5}
     common = dict(attacker="a", defenders=["d1", "d2"], targets=["flag", "home"], capture_radius=2.0, spacing=2.0)
-    plain = ReachAvoidAdvisor(campus, speeds=speeds, **common)
-    robust = ReachAvoidAdvisor(
-        campus, speeds=speeds, robust=True, uncertainty=Uncertainty({"a": 5.0, "d1": 10.0, "d2": 10.0}), **common
+    plain = answering(ReachAvoidAdvisor(campus, speeds=speeds, **common))
+    robust = answering(
+        ReachAvoidAdvisor(campus, speeds=speeds, uncertainty=Uncertainty({"a": 5.0, "d1": 10.0, "d2": 10.0}), **common),
+        "worst_case",
     )
     fixes = fixes_at(campus, {"a": (370.0, 30.0), "d1": (120.0, 150.0), "d2": (330.0, 200.0)})
     fresh = robust("a", fixes, 1.02)

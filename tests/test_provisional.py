@@ -16,6 +16,7 @@ from bearcat.runtime.solve_ahead import SolveBehind
 from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
 from bearcat.solvers.ctf.queries import CtfQueries
+from tests.support.answers import answering
 from tests.test_guidance import fixes_at
 
 GAME = """
@@ -32,7 +33,7 @@ grid = {grid}
 {provisional}
 
 [guidance]
-uncertainty = "none"  # answers at the fixes themselves, compared exactly across the sets
+method = "none"  # answers at the fixes themselves, compared exactly across the sets
 
 [[agent]]
 id = "attacker"
@@ -94,8 +95,8 @@ def test_a_provisional_ground_station_answers_from_coarse_sets_then_exactly_as_o
     cast = ground(game)
     awaited = cast.awaited
     assert (awaited.provisional, awaited.game.grid_points, awaited.stages) == (11, 17, "return")
-    advisor = cast.guidance.advisor
-    assert advisor.solved.geometry.grid.shape == (11, 11)
+    assert cast.guidance.advisor.solved.geometry.grid.shape == (11, 11)
+    advisor = answering(cast.guidance.advisor)
     assert cached(awaited.game, awaited.stages) is None
     fixes = fixes_at(game.map, {"attacker": (20.0, 18.0), "defender": (27.0, 31.0)})
     before = {agent: advisor(agent, fixes, 1.0) for agent in ("attacker", "defender")}
@@ -109,7 +110,7 @@ def test_a_provisional_ground_station_answers_from_coarse_sets_then_exactly_as_o
     assert own.awaited is None and own.guidance.advisor.solved.geometry.grid.shape == (17, 17)
     for agent in ("attacker", "defender"):
         after = advisor(agent, fixes, 1.0)  # the same fixes: what was kept of the old sets is gone
-        assert after == own.guidance.advisor(agent, fixes, 1.0)
+        assert after == answering(own.guidance.advisor)(agent, fixes, 1.0)
         assert after["value"] != before[agent]["value"]
 
 

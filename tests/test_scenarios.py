@@ -273,13 +273,13 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
     changed = vary(
         base,
         {
-            "guidance.uncertainty": "worst-case",
+            "guidance.method": "worst-case",
             "agent.*.fix_rate": 5.0,
             "agent.defender.reaction": 1.2,
             "agent.defender.options.standoff": 3.0,
         },
     )
-    assert changed.uncertainty == "worst-case" and base.uncertainty == "none"
+    assert method_of(changed) == "worst-case" and method_of(base) == "none"
     assert [a.fix_rate for a in changed.agents] == [5.0, 5.0]
     assert changed.agent("defender").reaction == 1.2
     assert changed.agent("attacker").reaction == base.agent("attacker").reaction
@@ -287,8 +287,8 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
     assert changed.behaviour_of("defender").options.lead == base.behaviour_of("defender").options.lead
     # Its TOML is what a peer fetching it gets: it reads back as the same scenario.
     again = parse_scenario(changed.text, game_map=changed.map)
-    assert again.agents == changed.agents and again.uncertainty == "worst-case"
-    assert "with guidance.uncertainty = 'worst-case'" in changed.source
+    assert again.agents == changed.agents and method_of(again) == "worst-case"
+    assert "with guidance.method = 'worst-case'" in changed.source
 
 
 @pytest.mark.parametrize(
@@ -296,9 +296,12 @@ def test_a_variant_changes_the_keys_it_names_and_is_a_scenario_in_every_respect(
     [
         ({"agent.nobody.reaction": 1.0}, "there is no agent 'nobody'; the ids are attacker, defender"),
         ({"uncertainty": "none"}, "names no key"),
-        ({"guidance.uncertainty": "cautious"}, "guidance.uncertainty"),
-        ({"guidance.robust": True}, "guidance.robust: was replaced by guidance.uncertainty"),
-        ({"agent.defender.robust": True}, "agent[1].robust: was replaced by agent[1].uncertainty"),
+        ({"guidance.method": "cautious"}, "guidance.method: there is no guidance method 'cautious'"),
+        ({"guidance.uncertainty": "none"}, "guidance.uncertainty: was replaced by guidance.method, which takes"),
+        ({"agent.defender.uncertainty": "none"}, "agent[1].uncertainty: was replaced by agent[1].guidance"),
+        ({"guidance.robust": True}, "guidance.robust: was replaced by guidance.method"),
+        ({"agent.defender.robust": True}, "agent[1].robust: was replaced by agent[1].guidance"),
+        ({"guidance.options": {"spread": 1.0}}, "guidance.options"),
         ({"agent.defender.reaction": -1.0}, "agent[1].reaction"),
         ({"guidance.confidence": 1.0}, "guidance.confidence"),
         ({"guidance.ablate": ["hindsight"]}, "guidance.ablate[0]"),
@@ -314,14 +317,23 @@ def test_a_bad_change_is_refused_in_one_sentence_naming_the_key(changes, message
 
 def test_new_scenarios_get_their_game_s_best_guidance_and_the_thesis_reproductions_keep_the_thesis_s(tmp_path):
     path = tmp_path / "new.toml"
-    path.write_text(scenario_text().replace('[guidance]\nuncertainty = "none"\n', ""))
-    assert "[guidance]" not in path.read_text() and load_scenario(path).uncertainty == "calibrated"
+    path.write_text(scenario_text().replace('[guidance]\nmethod = "none"\n', ""))
+    assert "[guidance]" not in path.read_text() and method_of(load_scenario(path)) == "calibrated"
     for name in ("fake-out", "fake-out-aided-defender", "go-no-go", "search", "open-loop", "small-area"):
-        assert load_scenario(name).uncertainty == "none", name
-    assert load_scenario("pursuit-field").uncertainty == "none"
+        assert method_of(load_scenario(name)) == "none", name
+    assert method_of(load_scenario("pursuit-field")) == "none"
     from bearcat.scenarios.variants import vary
 
-    one = vary(load_scenario("fake-out"), {"agent.defender.uncertainty": "calibrated"})
-    assert [one.uncertainty_of(a) for a in one.agents] == ["none", "calibrated"]
-    with pytest.raises(ScenarioError, match=re.escape("reach-avoid guidance has no 'calibrated' form")):
-        vary(load_scenario("open-loop"), {"guidance.uncertainty": "calibrated"})
+    one = vary(load_scenario("fake-out"), {"agent.defender.guidance": "calibrated"})
+    assert [one.guidance_of(a.id).entry.name for a in one.agents] == ["none", "calibrated"]
+    with pytest.raises(
+        ScenarioError,
+        match=re.escape("guidance method 'calibrated' builds on calibrated answers, which a reach-avoid game does not"),
+    ):
+        vary(load_scenario("open-loop"), {"guidance.method": "calibrated"})
+
+
+def method_of(scenario) -> str:
+    """The guidance method every agent of ``scenario`` gets."""
+    (name,) = {chosen.entry.name for chosen in scenario.guidance.values()}
+    return name

@@ -16,6 +16,7 @@ from bearcat.agents.ground_station.event_log import read_events
 from bearcat.agents.ground_station.uav_tasking import TRACK_FOR
 from bearcat.runtime.simulate import simulate
 from bearcat.scenarios.schema import ScenarioError, load_scenario, parse_scenario
+from tests.support.answers import answering
 
 
 def _text(**changes) -> str:
@@ -141,7 +142,7 @@ def test_the_attackers_go_holds_against_every_place_the_defender_may_be(scenario
     from bearcat.scenarios.cast import _CtfGame
 
     game = _CtfGame(scenario)
-    advisor = game.guidance(load_profile(scenario.netem)).advisor
+    advisor = answering(game.guidance(load_profile(scenario.netem)).advisor)
     tasker = game.tasker()
     solved = game.solved()
     attacker = np.array([125.0, 150.0])  # north of the hall, 35 m short of home

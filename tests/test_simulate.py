@@ -342,7 +342,7 @@ def test_worst_case_guidance_sends_each_report_s_disk_and_the_recording_draws_th
     differ, and the recording has the disks on the phone and beside the truth."""
     from bearcat.cli.main import main
 
-    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, uncertainty="worst-case")
+    path = write_scenario(tmp_path, defender_behaviour="follow-guidance", defender_aided=True, method="worst-case")
     assert main(["simulate", str(path), "--seed", "4", "--out", str(tmp_path / "out")]) == 0
     run = tmp_path / "out" / "seed-4"
     guidance = [

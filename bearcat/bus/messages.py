@@ -147,14 +147,21 @@ class Guidance(Message, tag="guidance", frozen=True):
 
     def __post_init__(self):
         super().__post_init__()
-        for name in ("value", "margin"):
-            number = getattr(self, name)
-            if number is not None and not math.isfinite(number):
-                raise ValueError(f"{name} must be finite")
-        for name in ("region", "boundary", "possible"):
-            points = sum(len(line) for line in getattr(self, name))
-            if points > OUTLINE_POINTS:
-                raise ValueError(f"{name} has {points} points in all, more than {OUTLINE_POINTS}")
+        check_shown(self)
+
+
+def check_shown(shown) -> None:
+    """Raise ValueError for what a screen cannot show of ``shown`` (a
+    ``Guidance``, or the advice that fills one): a value or margin that is
+    not finite, or outlines of more than ``OUTLINE_POINTS`` points."""
+    for name in ("value", "margin"):
+        number = getattr(shown, name)
+        if number is not None and not math.isfinite(number):
+            raise ValueError(f"{name} must be finite")
+    for name in ("region", "boundary", "possible"):
+        points = sum(len(line) for line in getattr(shown, name))
+        if points > OUTLINE_POINTS:
+            raise ValueError(f"{name} has {points} points in all, more than {OUTLINE_POINTS}")
 
 
 class GameState(Message, tag="state", frozen=True):

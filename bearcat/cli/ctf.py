@@ -14,6 +14,7 @@ from pathlib import Path
 
 from bearcat.agents.cache import cache_root
 from bearcat.agents.ground_station.ctf_cache import CtfGame, Solved, load_or_solve
+from bearcat.agents.ground_station.guidance.methods import BUILTINS, Calibrated, WorstCase
 from bearcat.cli import arguments
 from bearcat.cli.output import Output, add_json_option
 from bearcat.cli.progress import solve_bars
@@ -21,7 +22,6 @@ from bearcat.cli.writing import writing
 from bearcat.maps import load_map
 from bearcat.maps.ctf_rules import default_rules, unresolved_capture
 from bearcat.maps.geodesy import bearing
-from bearcat.scenarios.schema import UNCERTAINTIES
 from bearcat.solvers.ctf.playout import play
 from bearcat.solvers.ctf.queries import CtfQueries, StateReport
 from bearcat.solvers.ctf.sets import DEFAULT_TOL, SET_NAMES, STAGES
@@ -131,17 +131,18 @@ def register(commands: arguments.Commands) -> None:
     q.add_argument("--plot", type=Path, metavar="PNG", help="draw the state and both players' opponent regions")
     robust = q.add_argument_group(
         "answers for stale, noisy fixes",
-        "with --uncertainty worst-case or calibrated, each position is a fix taken some seconds ago. worst-case: "
+        "with --guidance worst-case or calibrated, each position is a fix taken some seconds ago. worst-case: "
         "the player is anywhere within its top speed x the fix's age plus the fix's error radius at the "
         "confidence, and the answers hold against all of it. calibrated: a tracker given the fix predicts the "
         "player to now; the attacker's go adds the margin 'bearcat calibrate' stored for the profile, and the "
         "defender's heading acts on a quantile of the value over the tracker's belief",
     )
     robust.add_argument(
-        "--uncertainty",
-        choices=UNCERTAINTIES,
+        "--guidance",
+        choices=tuple(BUILTINS),
         default="none",
-        help="none (default): the positions are exact; worst-case or calibrated: see above",
+        help="the built-in guidance method to answer with: none (default), the positions are exact; "
+        "worst-case or calibrated: see above",
     )
     robust.add_argument(
         "--netem",
@@ -327,7 +328,8 @@ def run_query(args) -> int:
     guidance = CtfQueries(solved.solution)
     phase = args.phase or ("return" if args.stages == "return" else "capture")
     report = guidance.evaluate(args.attacker, args.defender, phase)
-    args.robust = args.uncertainty == "worst-case"
+    method = BUILTINS[args.guidance]
+    args.robust = method is WorstCase
     if args.robust:
         robust = robust_answers(args, game, guidance, phase)
         report = StateReport(report.value, robust["attacker"].heading, robust["defender"].heading)
@@ -365,7 +367,7 @@ def run_query(args) -> int:
                 f"worst case {a.worst:+.3f} m, {verdict if a.wins else 'no ' + verdict}"
                 + (" - uncertain: the plain answer differs" if a.uncertain else "")
             )
-    if args.uncertainty == "calibrated":
+    if method is Calibrated:
         calibrated = calibrated_answers(args, game, guidance, phase)
         answer["calibrated"] = calibrated
         a, d = calibrated["attacker"], calibrated["defender"]
@@ -465,8 +467,7 @@ def calibrated_answers(args, game: CtfGame, guidance: CtfQueries, phase: str) ->
         attacker="attacker",
         defender="defender",
         phase=phase,
-        methods={"attacker": "calibrated", "defender": "calibrated"},
-        calibration=calibration,
+        calibration=lambda: calibration,
         alpha=args.alpha,
     )
     estimate = Estimate(now, beliefs["attacker"], beliefs["defender"], now)

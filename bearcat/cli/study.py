@@ -183,6 +183,7 @@ def uncalibrated(tasks) -> list[str]:
     """A line for each scenario and profile whose calibrated attackers will
     have no calibration to answer from, naming the command that makes one."""
     from bearcat.agents.ground_station.calibration_store import calibrate_command, load_calibration
+    from bearcat.agents.ground_station.guidance.methods import Calibrated
     from bearcat.agents.ground_station.tracker import TRACKER_ABLATIONS
     from bearcat.netem.profiles import load_profile
     from bearcat.scenarios.cast import ctf_of, is_ctf
@@ -193,7 +194,8 @@ def uncalibrated(tasks) -> list[str]:
     wanted: dict[tuple, Scenario] = {}
     for name, netem, changes in sorted(cells, key=str):
         scenario = vary(load_scenario(name), json.loads(changes))
-        calibrated = is_ctf(scenario) and scenario.uncertainty_of(scenario.team("attacker")[0]) == "calibrated"
+        attacker = scenario.team("attacker")[0].id
+        calibrated = is_ctf(scenario) and scenario.guidance_of(attacker).entry.factory is Calibrated
         if calibrated and "calibration" not in scenario.ablate:
             tracker = tuple(sorted(set(scenario.ablate) & set(TRACKER_ABLATIONS)))
             wanted.setdefault((name, netem, tracker), scenario)

@@ -29,6 +29,7 @@ from bearcat.agents.ground_station.guidance import (
     SearchAdvisor,
 )
 from bearcat.agents.ground_station.guidance.fixes import Uncertainty
+from bearcat.agents.ground_station.guidance.method import TRACKS
 from bearcat.agents.ground_station.referee import Contest, Referee
 from bearcat.agents.ground_station.sight import Sight
 from bearcat.agents.ground_station.tasking import Uav
@@ -47,7 +48,7 @@ from bearcat.agents.uav.autopilot import SimulatedAutopilot
 from bearcat.maps.ctf_rules import default_rules, provisional_grid, unresolved_capture
 from bearcat.netem.profiles import Profile
 from bearcat.scenarios.game import Game
-from bearcat.scenarios.schema import UNCERTAINTIES, CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
+from bearcat.scenarios.schema import CtfRules, PursuitRules, ReachAvoidRules, Scenario, ScenarioError
 from bearcat.solvers.ctf.queries import CtfQueries
 
 log = logging.getLogger(__name__)
@@ -55,7 +56,7 @@ TASKER = "uav-tasking"  # the name the ground station's UAV tasking goes by in l
 _UNCALIBRATED: set[tuple[str, str, float, tuple[str, ...]]] = set()
 """The scenarios, profiles and alphas this process has said it has no calibration of."""
 
-STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3, "tasking": 4}
+STREAMS = {"walker": 0, "phone": 1, "behaviour": 2, "uav": 3, "tasking": 4, "guidance": 5}
 _Rules = TypeVar("_Rules", CtfRules, ReachAvoidRules, PursuitRules)
 
 
@@ -210,7 +211,8 @@ class _CtfGame(Game):
 
     Options = CtfRules
     teams = ("attacker", "defender")
-    uncertainties = UNCERTAINTIES
+    answers = frozenset({"plain", "worst_case", "calibrated"})
+    default_guidance = "calibrated"
 
     def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
         attackers, defenders = scenario.team("attacker"), scenario.team("defender")
@@ -306,17 +308,14 @@ class _CtfGame(Game):
 
     def guidance(self, profile: Profile, progress=None) -> GuidanceService:
         s = self.scenario
-        methods = {a.id: s.uncertainty_of(a) for a in s.agents}
-        calibrated = "calibrated" in methods.values()
         self._advisor = CtfAdvisor(
             s.map,
             self.solved(progress),
             attacker=self.attacker.id,
             defender=self.defender.id,
             phase=self.phase,
-            methods=methods,
             uncertainty=_uncertainty(s),
-            calibration=self.calibration(profile) if self._calibrated_go(methods) else None,
+            calibration=functools.partial(self.calibration, profile),
             alpha=s.alpha,
             defender_quantile=s.defender_quantile,
             ablate=s.ablate,
@@ -325,11 +324,7 @@ class _CtfGame(Game):
         if s.uavs:
             advisor = SearchAdvisor(self._advisor, self.tasker(), self.sight.side("attacker"))
         sight = self.sight if self.sight.line_of_sight or s.uavs else None
-        return _service(s, advisor, sight=sight, tracking=tracking(s, profile) if calibrated else None)
-
-    def _calibrated_go(self, methods: dict[str, str]) -> bool:
-        """Whether the attacker's go takes a calibrated margin."""
-        return methods[self.attacker.id] == "calibrated" and "calibration" not in self.scenario.ablate
+        return guidance_service(s, advisor, profile, self.seed, self.clock, sight=sight)
 
     def calibration(self, profile: Profile) -> Calibration | None:
         """The game's calibration on ``profile``, if ``bearcat calibrate`` made
@@ -426,7 +421,6 @@ class _PursuitGame(Game):
 
     Options = PursuitRules
     teams = ("evader", "pursuer")
-    uncertainties = ("none",)
     awaited = None
 
     def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
@@ -440,6 +434,7 @@ class _PursuitGame(Game):
         if len(evaders) != 1:
             raise ScenarioError(f"{scenario.source}: a pursuit game has one evader")
         self.evader = evaders[0]
+        self.seed, self.clock = seed, clock
         self.pursuers = scenario.team("pursuer")
         self.table = _rules_of(scenario, PursuitRules)
         self._navigator: Navigator | None = None
@@ -458,7 +453,7 @@ class _PursuitGame(Game):
     def guidance(self, profile: Profile, progress=None) -> GuidanceService:
         s = self.scenario
         advisor = PursuitAdvisor(s.map, evader=self.evader.id, pursuers=[p.id for p in self.pursuers])
-        return _service(s, advisor)
+        return guidance_service(s, advisor, profile, self.seed, self.clock)
 
     def person(self, spec, profile: Profile, seed: int, clock=None) -> HumanAgent:
         if self._navigator is None:
@@ -475,7 +470,8 @@ class _ReachAvoidGame(Game):
 
     Options = ReachAvoidRules
     teams = ("attacker", "defender")
-    uncertainties = ("none", "worst-case")
+    answers = frozenset({"plain", "worst_case"})
+    default_guidance = "worst-case"
     awaited = None
 
     def __init__(self, scenario: Scenario, provisional: bool = False, seed: int = 0, clock=None) -> None:
@@ -485,6 +481,7 @@ class _ReachAvoidGame(Game):
             raise ScenarioError(f"{scenario.source}: a reach-avoid game has one attacker")
         self.attacker = attackers[0]
         self.defenders = scenario.team("defender")
+        self.seed, self.clock = seed, clock
         self.table = _rules_of(scenario, ReachAvoidRules)
         names = self.table.targets
         self.targets = [(n, scenario.map.region(n).geometry) for n in names]
@@ -515,10 +512,9 @@ class _ReachAvoidGame(Game):
             speeds={a.id: a.speed for a in s.agents},
             capture_radius=self.radius,
             spacing=self.table.spacing or max(xmax - xmin, ymax - ymin) / 200,
-            robust=s.uncertainty_of(self.attacker) == "worst-case",
             uncertainty=_uncertainty(s),
         )
-        return _service(s, advisor)
+        return guidance_service(s, advisor, profile, self.seed, self.clock)
 
     def person(self, spec, profile: Profile, seed: int, clock=None) -> HumanAgent:
         if self._navigator is None:
@@ -528,18 +524,32 @@ class _ReachAvoidGame(Game):
         return _person(self.scenario, spec, profile, seed, situation, self.goals, "capture", clock=clock)
 
 
-def _service(scenario: Scenario, advisor, sight=None, tracking=None) -> GuidanceService:
-    """The guidance service of ``scenario`` with ``advisor`` for its aided agents."""
+def guidance_service(scenario: Scenario, advisor, profile: Profile, seed: int, clock=None, sight=None):
+    """The guidance service of ``scenario``: each aided agent's guidance
+    method, answering from ``advisor``, the game's, held to its budget on
+    ``clock`` (None: no budget); trackers of every agent on ``profile``'s
+    GPS where some agent's method reads them (``TRACKS``)."""
+    budget = 0.25 / scenario.guidance_rate if scenario.guidance_budget is None else scenario.guidance_budget
+    methods = {}
+    for agent in (a for a in scenario.agents if a.aided):
+        chosen = scenario.guidance_of(agent.id)
+        guard = Guard(agent.id, chosen.entry.name, budget, clock)
+        rng = stream(seed, agent.id, "guidance")
+        made = _made(chosen.entry, "advise")
+        methods[agent.id] = (guard.call(0.0, chosen.entry.factory, chosen.options, rng, check=made, timed=False), guard)
+    tracks = any(chosen.entry.has(TRACKS) for chosen in scenario.guidance.values())
     return GuidanceService(
         scenario.name,
         scenario.map,
         scenario.ids,
         advisor=advisor,
-        aided={a.id: a.aided for a in scenario.agents},
+        methods=methods,
+        teams={a.id: a.team for a in scenario.agents},
+        speeds={a.id: a.speed for a in scenario.agents} | {u.id: u.speed for u in scenario.uavs},
         rate=scenario.guidance_rate,
         sight=sight,
         uncertainty=_uncertainty(scenario),
-        tracking=tracking,
+        tracking=tracking(scenario, profile) if tracks else None,
     )
 
 

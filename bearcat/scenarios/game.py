@@ -5,8 +5,9 @@ A scenario's ``game`` key names an entry of ``GAMES``: the built-ins
 (capture-the-flag, open-loop reach-avoid, cooperative pursuit, in
 ``cast``) or a game of one's own, found as any plug-in is. The entry's
 options type is the game's rules: the scenario's ``[rules]`` table is read
-into it. Its class declares the two teams that play and the forms its
-guidance has (the last, a scenario's default).
+into it. Its class declares the two teams that play, the forms of answer
+its guidance's advisor gives (which guidance methods build on) and the
+method a scenario that names none gets.
 """
 
 from __future__ import annotations
@@ -36,7 +37,8 @@ class Game(Protocol):
     Options: ClassVar[type[msgspec.Struct]]
     traits: ClassVar[frozenset[str]] = frozenset()
     teams: ClassVar[tuple[str, str]]
-    uncertainties: ClassVar[tuple[str, ...]] = ("none",)
+    answers: ClassVar[frozenset[str]] = frozenset({"plain"})
+    default_guidance: ClassVar[str] = "none"
     awaited: Any = None
 
     def referee(self, on_truth: bool = True) -> Referee:

@@ -18,7 +18,8 @@ whether their phone shows reachability guidance::
 
     [guidance]
     rate = 10.0                  # Hz, per agent
-    uncertainty = "calibrated"   # none | worst-case | calibrated: how stale, noisy fixes are answered for
+    method = "calibrated"        # none | worst-case | calibrated | one's own: what aided phones are told
+    options = {}                 # the method's options
     alpha = 0.01                 # calibrated: the share of goes the margin lets be wrong
     confidence = 0.95            # worst-case: of a fix's GPS error circle the disks hold (0: its age only)
 
@@ -30,7 +31,8 @@ whether their phone shows reachability guidance::
     behaviour = "fake-out"       # a built-in, or one's own: "file.py:Class", "module:Class" or an installed name
     options = { spread = 80.0 }  # the behaviour's options
     aided = true
-    uncertainty = "none"         # optional: this agent's own, instead of guidance.uncertainty
+    guidance = "none"            # optional: this agent's own method, instead of guidance.method
+    guidance_options = {}        # its options
 
     [[uav]]                      # optional: quadrotors flying for a team (thesis 6.2)
     id = "q1"
@@ -64,6 +66,7 @@ import tomli_w
 from msgspec import Meta
 from shapely.geometry import Polygon
 
+from bearcat.agents.ground_station.guidance.method import GUIDANCE_METHODS, GuidanceMethod
 from bearcat.agents.ground_station.tasking import TASKING
 from bearcat.agents.human.behaviour import BEHAVIOURS, COMMITS
 from bearcat.agents.options import Angle, Options, Period, Point
@@ -87,13 +90,6 @@ if TYPE_CHECKING:
 else:
     ProfileName = Literal[tuple(load_profiles())]
     Device = Literal[DEVICES]
-Uncertainty = Literal["none", "worst-case", "calibrated"]
-UNCERTAINTIES: tuple[Uncertainty, ...] = get_args(Uncertainty)
-"""How guidance answers for positions the network delivered stale and noisy:
-``none`` at the reports as they are (the thesis's guidance); ``worst-case``
-against every place the disks round the fixes allow; ``calibrated`` where a
-tracker predicts the players are now, with a margin measured on simulated
-games (``bearcat calibrate``)."""
 Ablation = Literal["prediction", "bias", "manoeuvre", "calibration", "belief"]
 ABLATIONS: tuple[Ablation, ...] = get_args(Ablation)
 """Parts of calibrated guidance a study may switch off, to measure what each
@@ -146,7 +142,8 @@ class AgentSpec(_Table, frozen=True):
     behaviour: PluginName
     options: dict[str, Any] = {}  # read into the behaviour's options type (Scenario.behaviour_of)
     aided: bool = True
-    uncertainty: Uncertainty | None = None  # this agent's guidance; None: the scenario's guidance.uncertainty
+    guidance: PluginName | None = None  # this agent's guidance method; None: the scenario's guidance.method
+    guidance_options: dict[str, Any] = {}  # read into its options type (Scenario.guidance_of)
     fix_rate: Rate = 1.0
     reaction: Annotated[float, Meta(ge=0.0, le=10.0, extra={"unit": "s"})] = 0.4  # from a display change to a turn
     heading_error: Angle = 10.0  # standard deviation of following a displayed heading
@@ -240,10 +237,14 @@ class ScenarioTable(_Table, frozen=True):
 
 class GuidanceTable(_Table, frozen=True):
     rate: Rate = 10.0
-    # How answers treat stale, noisy fixes (UNCERTAINTIES); None: the best
-    # form the game has (its class's uncertainties): calibrated for
+    # What aided phones are told, a plug-in of GUIDANCE_METHODS; None: its
+    # game's default (its class's default_guidance): calibrated for
     # capture-the-flag, worst-case for reach-avoid, none for pursuit.
-    uncertainty: Uncertainty | None = None
+    method: PluginName | None = None
+    options: dict[str, Any] = {}  # read into the method's options type (Scenario.guidance_of)
+    # How long, in live runs, a method may take to answer before its
+    # answer is dropped; None: a quarter of the guidance period.
+    budget: Annotated[float, Meta(gt=0.0, le=10.0, extra={"unit": "s"})] | None = None
     # worst-case: the share of a fix's GPS error the disks hold (the radius
     # of its 95 % circle by default); 0: only how far an agent may have
     # moved since its fix.
@@ -280,7 +281,6 @@ class Scenario:
     seed: int
     rules: msgspec.Struct  # read into its game's rules type (game_entry.options_type)
     guidance_rate: float
-    uncertainty: str  # the scenario's guidance.uncertainty, its game's default filled in
     guidance_confidence: float
     agents: tuple[AgentSpec, ...]
     description: str
@@ -295,11 +295,17 @@ class Scenario:
     ablate: tuple[str, ...] = ()  # calibrated: parts switched off (ABLATIONS)
     behaviours: dict[str, Plugged] = field(default_factory=dict)  # agent -> its behaviour, options read
     tasking: dict[str, Plugged] = field(default_factory=dict)  # UAV -> its tasking policy, options read
+    guidance: dict[str, Plugged] = field(default_factory=dict)  # agent -> its guidance method, options read
+    guidance_budget: float | None = None  # s a method may take in live runs; None: a quarter of the period
     directory: Path | None = None  # the folder of the scenario's file, which file.py:attribute plug-ins are in
 
     def behaviour_of(self, agent: str) -> Plugged:
         """How ``agent`` decides: its behaviour's entry, with the options the scenario gives it."""
         return self.behaviours[agent]
+
+    def guidance_of(self, agent: str) -> Plugged:
+        """What ``agent``'s phone is told: its guidance method's entry, with the options the scenario gives it."""
+        return self.guidance[agent]
 
     def tasking_of(self, uav: str) -> Plugged:
         """How the ground station tasks ``uav``: its policy's entry, with the options the scenario gives it."""
@@ -312,10 +318,6 @@ class Scenario:
 
     def uav_of(self, team: str) -> list[UavSpec]:
         return [u for u in self.uavs if u.team == team]
-
-    def uncertainty_of(self, agent: AgentSpec) -> str:
-        """How ``agent``'s guidance treats stale, noisy fixes: its own setting, else the scenario's."""
-        return self.uncertainty if agent.uncertainty is None else agent.uncertainty
 
     def team(self, name: str) -> list[AgentSpec]:
         return [a for a in self.agents if a.team == name]
@@ -388,8 +390,8 @@ def parse_scenario(
                 raise Invalid("scenario.map", str(exc)) from None
         behaviours = _plugged(BEHAVIOURS, "agent", [(a.id, a.behaviour, a.options) for a in file.agent], directory)
         tasking = _plugged(TASKING, "uav", [(u.id, u.search, u.search_options) for u in file.uav], directory)
+        guidance = _guidance(file, declared, directory)
         _check_against(file, rules, game_map, behaviours, declared.teams)
-        _check_uncertainty(file, declared.uncertainties)
         text = _located(text, data, directory)
     except (Invalid, MapError) as exc:
         raise ScenarioError(f"{source}: {exc}") from None
@@ -404,7 +406,6 @@ def parse_scenario(
         seed=head.seed,
         rules=rules,
         guidance_rate=file.guidance.rate,
-        uncertainty=file.guidance.uncertainty or declared.uncertainties[-1],
         guidance_confidence=file.guidance.confidence,
         alpha=file.guidance.alpha,
         defender_quantile=file.guidance.defender_quantile,
@@ -419,6 +420,8 @@ def parse_scenario(
         game_entry=game,
         behaviours=behaviours,
         tasking=tasking,
+        guidance=guidance,
+        guidance_budget=file.guidance.budget,
         directory=directory,
     )
 
@@ -428,7 +431,8 @@ def _located(text: str, data: dict, directory: Path | None) -> str:
     folder, the same scenario naming that file by its absolute path: the
     text a run keeps and serves, which its peers and checker read from
     other folders."""
-    named = [(data["scenario"], "game")] + [(agent, "behaviour") for agent in data["agent"]]
+    named = [(data["scenario"], "game"), (data.get("guidance", {}), "method")]
+    named += [(agent, key) for agent in data["agent"] for key in ("behaviour", "guidance")]
     named += [(uav, "search") for uav in data.get("uav", ())]
     relative = [
         (table, key)
@@ -449,37 +453,61 @@ def _plugged(registry: Registry, kind: str, named, directory: Path | None) -> di
     """For each (id, plug-in, options) of the ``kind`` tables, its entry from
     ``registry`` with the options read into its type."""
     key, options_key = {"agent": ("behaviour", "options"), "uav": ("search", "search_options")}[kind]
+    return {
+        name: _plug(registry, ref, options, directory, f"{kind}[{k}].{key}", f"{kind}[{k}].{options_key}")
+        for k, (name, ref, options) in enumerate(named)
+    }
+
+
+def _plug(registry: Registry, ref: str, options: dict, directory: Path | None, at: str, options_at: str) -> Plugged:
+    """The entry ``ref`` names in ``registry`` (a scenario's key ``at``), with ``options`` read into its type."""
+    try:
+        entry = registry.get(ref, directory)
+    except PluginError as exc:
+        raise Invalid(at, str(exc)) from None
+    return Plugged(entry, convert(options, entry.options_type, at=options_at))
+
+
+def _guidance(file: ScenarioFile, game: type[Game], directory: Path | None) -> dict[str, Plugged]:
+    """Each agent's guidance method (its own, else the scenario's, else its
+    ``game``'s default), with its options, refused where it builds on a
+    form of answer the game does not give."""
+    table = file.guidance
+    method = table.method or game.default_guidance
+    shared = _plug(GUIDANCE_METHODS, method, table.options, directory, "guidance.method", "guidance.options")
     chosen = {}
-    for k, (name, ref, options) in enumerate(named):
-        try:
-            entry = registry.get(ref, directory)
-        except PluginError as exc:
-            raise Invalid(f"{kind}[{k}].{key}", str(exc)) from None
-        read = convert(options, entry.options_type, at=f"{kind}[{k}].{options_key}")
-        chosen[name] = Plugged(entry, read)
+    for k, agent in enumerate(file.agent):
+        at = f"agent[{k}].guidance"
+        own = agent.guidance is not None
+        plugged = shared
+        if agent.guidance is not None:
+            plugged = _plug(GUIDANCE_METHODS, agent.guidance, agent.guidance_options, directory, at, f"{at}_options")
+        missing = typing.cast(type[GuidanceMethod], plugged.entry.factory).needs - game.answers
+        if missing:
+            raise Invalid(
+                at if own else "guidance.method",
+                f"guidance method {plugged.entry.name!r} builds on {' and '.join(sorted(missing))} answers, "
+                f"which a {file.scenario.game} game does not give (it gives {', '.join(sorted(game.answers))})",
+            )
+        chosen[agent.id] = plugged
     return chosen
-
-
-def _check_uncertainty(file: ScenarioFile, offered: tuple[str, ...]) -> None:
-    """Each agent's guidance asks only for a form its game's guidance has (``offered``)."""
-    game = file.scenario.game
-    asked = [("guidance.uncertainty", file.guidance.uncertainty)]
-    asked += [(f"agent[{k}].uncertainty", agent.uncertainty) for k, agent in enumerate(file.agent)]
-    for path, form in asked:
-        if form is not None and form not in offered:
-            raise Invalid(path, f"{game} guidance has no {form!r} form; it has {', '.join(map(repr, offered))}")
 
 
 def _check_renamed(data: dict) -> None:
     """A key an older bearcat read, named with what replaced it."""
-    replaced = 'was replaced by {}uncertainty: "worst-case" for true, "none" for false'
+    renamed = {
+        "robust": '{}: "worst-case" for true, "none" for false',
+        "uncertainty": "{}, which takes the same names (none, worst-case, calibrated) and methods of one's own",
+    }
     guidance = data.get("guidance")
-    if isinstance(guidance, dict) and "robust" in guidance:
-        raise Invalid("guidance.robust", replaced.format("guidance."))
     agents = data.get("agent")
-    for k, agent in enumerate(agents if isinstance(agents, list) else ()):
-        if isinstance(agent, dict) and "robust" in agent:
-            raise Invalid(f"agent[{k}].robust", replaced.format(f"agent[{k}]."))
+    tables = [("guidance.", "method", guidance)]
+    listed = agents if isinstance(agents, list) else ()
+    tables += [(f"agent[{k}].", "guidance", agent) for k, agent in enumerate(listed)]
+    for prefix, new, table in tables:
+        for old, how in renamed.items():
+            if isinstance(table, dict) and old in table:
+                raise Invalid(f"{prefix}{old}", "was replaced by " + how.format(prefix + new))
 
 
 def _check_against(

@@ -3,7 +3,7 @@
 A change names a key by its path in the file, dotted, with an agent or UAV
 picked by its id (``*``: every one)::
 
-    guidance.uncertainty         = "worst-case"
+    guidance.method              = "worst-case"
     agent.defender.reaction      = 0.8
     agent.*.fix_rate             = 5.0
     agent.defender.options       = { standoff = 3.0 }
@@ -46,7 +46,7 @@ def vary(scenario: Scenario, changes: dict) -> Scenario:
 def _set(data: dict, path: str, value, source: str) -> None:
     parts = path.split(".")
     if len(parts) < 2:
-        raise ScenarioError(f"{source}: change {path!r} names no key; write TABLE.KEY, such as guidance.uncertainty")
+        raise ScenarioError(f"{source}: change {path!r} names no key; write TABLE.KEY, such as guidance.method")
     head, rest = parts[0], parts[1:]
     if head in LISTS:
         if len(rest) < 2:

@@ -1,6 +1,6 @@
 """Calibration games: simulated games whose answers are scored against the truth.
 
-Each game is played with the thesis's guidance (``uncertainty = "none"``
+Each game is played with the thesis's guidance (``method = "none"``
 for every agent), so that what is measured does not depend on an earlier
 calibration. Its event log is then replayed through what a calibrated
 ground station keeps: the fixes the ground station received, in the order
@@ -65,7 +65,7 @@ def play_calibration_task(task: dict) -> dict:
     from bearcat.scenarios.schema import load_scenario
     from bearcat.scenarios.variants import vary
 
-    plain = {"guidance.uncertainty": "none", "agent.*.uncertainty": "none", "guidance.ablate": task.get("ablate", [])}
+    plain = {"guidance.method": "none", "agent.*.guidance": "none", "guidance.ablate": task.get("ablate", [])}
     scenario = vary(load_scenario(task["scenario"]), plain)
     profile = load_profile(task["netem"])
     with tempfile.TemporaryDirectory() as tmp:

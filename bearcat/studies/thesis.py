@@ -7,7 +7,7 @@
   often the phones report; the aided defender, on plain, worst-case and
   calibrated guidance, gives the reference rows.
 - ``holding``: the aided defender from the fake-out starts, its guidance
-  plain, worst-case or calibrated (``guidance.uncertainty``), per network
+  plain, worst-case or calibrated (``guidance.method``), per network
   profile and report rate.
 - ``go-no-go`` (3.5.2): an attacker waiting by cover commits when its
   display says go; a go the game then loses is a false go. Plain against
@@ -33,10 +33,10 @@ from dataclasses import dataclass, field
 PROFILES = ("ideal", "wifi", "3g", "3g-degraded")
 
 GUIDANCE = {
-    "plain": {"uncertainty": "none", "confidence": 0.95},
-    "worst-case": {"uncertainty": "worst-case", "confidence": 0.95},
-    "worst-case, age only": {"uncertainty": "worst-case", "confidence": 0.0},
-    "calibrated": {"uncertainty": "calibrated", "confidence": 0.95},
+    "plain": {"method": "none", "confidence": 0.95},
+    "worst-case": {"method": "worst-case", "confidence": 0.95},
+    "worst-case, age only": {"method": "worst-case", "confidence": 0.0},
+    "calibrated": {"method": "calibrated", "confidence": 0.95},
 }
 """The guidance a study compares: answers at the reports as they are; the
 worst case over where the players may be, GPS error included (its 95 %
@@ -93,9 +93,9 @@ class Study:
 def _guidance(name: str, who: str | None) -> dict:
     """The changes that give ``who`` (None: everybody) guidance ``name``."""
     spec = (GUIDANCE | ABLATED)[name]
-    method = "guidance.uncertainty" if who is None else f"agent.{who}.uncertainty"
+    key = "guidance.method" if who is None else f"agent.{who}.guidance"
     ablate = {"guidance.ablate": spec["ablate"]} if "ablate" in spec else {}
-    return {method: spec["uncertainty"], "guidance.confidence": spec["confidence"]} | ablate
+    return {key: spec["method"], "guidance.confidence": spec["confidence"]} | ablate
 
 
 def _offered(study: str) -> list[str]:

@@ -1,6 +1,6 @@
 """A small capture-the-flag scenario for the field-simulator tests: the
 fake-out setup of thesis 3.5.1 on a 21 x 21 grid, which solves in seconds,
-with the thesis's guidance (answers at the reports) unless ``uncertainty``
+with the thesis's guidance (answers at the reports) unless ``method``
 says otherwise."""
 
 SCENARIO = """
@@ -20,7 +20,7 @@ grid = 21
 return_time = 60.0
 
 [guidance]
-uncertainty = "{uncertainty}"
+method = "{method}"
 
 [[agent]]
 id = "attacker"
@@ -50,7 +50,7 @@ def scenario_text(
     attacker_behaviour="fake-out",
     defender_behaviour="direct",
     defender_aided=False,
-    uncertainty="none",
+    method="none",
     lease=10.0,
 ) -> str:
     return SCENARIO.format(
@@ -62,7 +62,7 @@ def scenario_text(
         attacker_behaviour=attacker_behaviour,
         defender_behaviour=defender_behaviour,
         defender_aided=str(defender_aided).lower(),
-        uncertainty=uncertainty,
+        method=method,
         lease=lease,
     )
 

@@ -2,16 +2,16 @@
 defender's winning region R_D(x_a), its optimal heading and go (the reported
 state is an attacker win); the defender's shows R_A(x_d) and its heading.
 
-Each agent's guidance treats the stale, noisy fixes in one of three ways
-(``[guidance] uncertainty``):
+Its advisor answers in three forms, one for each built-in guidance method
+(``methods``), each a way of treating the stale, noisy fixes:
 
-- ``none``: the fixes are taken as exact, as in the thesis.
-- ``worst-case``: each player is anywhere in the disk its last fix allows
+- ``plain`` (method ``none``): the fixes are taken as exact, as in the thesis.
+- ``worst_case`` (``worst-case``): each player is anywhere in the disk its last fix allows
   (``solvers.ctf.robust``), go and "winning" hold against all of it, the
   region is the opponent's region against the worst of it, and
   ``uncertain`` says that the plain answer at the fixes would have said
   otherwise.
-- ``calibrated``: the players are where their trackers predict them now
+- ``calibrated`` (``calibrated``): the players are where their trackers predict them now
   (``tracker``), the answers are the plain ones there, and what the
   prediction gets wrong is paid for as measured. The attacker's go holds
   when the value plus the calibrated margin for the reports' age is below
@@ -27,6 +27,7 @@ Each agent's guidance treats the stale, noisy fixes in one of three ways
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
@@ -34,6 +35,7 @@ from scipy.stats import norm, qmc
 
 from bearcat.agents.ground_station.calibration import Calibration
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty, nearest_inside
+from bearcat.agents.ground_station.guidance.method import Advice, GuidanceView
 from bearcat.agents.ground_station.guidance.outlines import on_the_wire, polygon_rings
 from bearcat.agents.ground_station.tracker import Belief
 from bearcat.bus.messages import GameState
@@ -78,7 +80,11 @@ DRAWS = _draws()
 
 
 class CtfAdvisor:
-    """The CTF fields of a phone's guidance, from the solved sets of one game."""
+    """The CTF fields of a phone's guidance, from the solved sets of one
+    game. ``calibration`` loads the game's calibration, the first time an
+    attacker's calibrated go needs it (None: there is none)."""
+
+    kind = "ctf"
 
     def __init__(
         self,
@@ -88,9 +94,8 @@ class CtfAdvisor:
         attacker: str,
         defender: str,
         phase: str = "capture",
-        methods: dict[str, str] | None = None,
         uncertainty: Uncertainty | None = None,
-        calibration: Calibration | None = None,
+        calibration: Callable[[], Calibration | None] | None = None,
         alpha: float = 0.01,
         defender_quantile: float = 0.5,
         ablate: tuple[str, ...] = (),
@@ -98,82 +103,90 @@ class CtfAdvisor:
         self.map = game_map
         self.attacker, self.defender = attacker, defender
         self.phase = phase
-        self.methods = dict(methods or {})
         rules = solved.solution.rules
         self.uncertainty = uncertainty or Uncertainty({attacker: rules.attacker_speed, defender: rules.defender_speed})
-        self.calibration = calibration
+        self._load = calibration
+        self._loaded: tuple[Calibration | None] | None = None
         self.alpha = alpha
         self.defender_quantile = defender_quantile
         self.ablate = frozenset(ablate)
         self.adopt(solved)
-
-    @property
-    def tracking(self) -> bool:
-        """Whether some agent's guidance is calibrated, and so needs the players tracked."""
-        return "calibrated" in self.methods.values()
 
     def adopt(self, solved: CtfQueries) -> None:
         """Answer from ``solved`` from now on: the same game on another grid
         (a ground station that started on provisional sets takes up its own).
         What was kept of the old sets' answers goes with them."""
         self.solved = solved
-        self.robust = RobustCtf(solved) if "worst-case" in self.methods.values() else None
-        self.sampled = SampledCtf(solved) if self.tracking else None
+        self._robust: RobustCtf | None = None
+        self._sampled: SampledCtf | None = None
         spacing = min(solved.geometry.grid.spacing)
         # Fixes outside the free space go to its nearest point a whisker inside.
         self._inside = self.map.free_space.buffer(-0.05 * spacing)
         self._simplify = 0.25 * spacing
         self._region_step = 0.5 * spacing
+        self.forget()
+
+    def forget(self) -> None:
+        """Keep no answer: what a warm-up answered is not what a game's first fix is answered from."""
         self._regions: dict[str, tuple[tuple, list]] = {}
         self._outlines: dict[str, tuple[tuple, list]] = {}
-        self._last: dict[str, tuple[tuple, dict]] = {}
+        self._last: dict[str, tuple[tuple, Advice]] = {}
         self._drawn: tuple[Belief, Belief, tuple[np.ndarray, np.ndarray]] | None = None
 
-    def warm_up(self, starts) -> None:
-        """Run the query kernels, then answer each side once with the
-        players at ``starts`` (agent -> map point; robustly too where
-        asked), and keep nothing. The first queries of a process load the
-        compiled kernels from numba's cache (a third of a second) or, after
-        a fresh clone, compile them (two seconds), and the first outline
-        traced loads contourpy and shapely: see ``GuidanceService.warm_up``.
-        It may run on another thread than the game's queries: those only
-        read, and the robust region it may keep is the one the same fixes
-        would give."""
+    def warm_up(self) -> None:
+        """Run the query kernels of every phase once and keep nothing: the
+        first queries of a process load them from numba's cache (a third of
+        a second) or, after a fresh clone, compile them (two seconds); see
+        ``GuidanceService.warm_up``. It may run on another thread than the
+        game's queries: those only read."""
         self.solved.warm_up()
-        a, d = (np.asarray(starts[who], float) for who in (self.attacker, self.defender))
-        radius = min(self.solved.geometry.grid.spacing)
-        for agent in (self.attacker, self.defender):
-            self.answer_at(agent, a, d)
-            method = self.methods.get(agent, "none")
-            if method == "worst-case":
-                self.answer_at(agent, a, d, (radius, radius))
-            elif method == "calibrated":
-                standing = Estimate(0.0, _standing(a, radius), _standing(d, radius), 0.0)
-                self.calibrated_answer(agent, standing)
+
+    @property
+    def robust(self) -> RobustCtf:
+        """The robust queries of worst-case answers, made at the first."""
+        if self._robust is None:
+            self._robust = RobustCtf(self.solved)
+        return self._robust
+
+    @property
+    def sampled(self) -> SampledCtf:
+        """The queries over a belief's samples of calibrated answers, made at the first."""
+        if self._sampled is None:
+            self._sampled = SampledCtf(self.solved)
+        return self._sampled
 
     def state(self, message: GameState) -> None:
         self.phase = "capture" if message.flag_holder is None else "return"
 
-    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
-        """The CTF fields of ``agent``'s guidance. They depend only on the two
-        latest fixes and the phase (and, for robust guidance, the sets'
-        radii, rounded up to ``RADIUS_STEP``), which change less often than
-        guidance goes out, so the last answer per agent is kept."""
-        latest = fixes.latest
+    def plain(self, view: GuidanceView) -> Advice:
+        """The answer at the latest fixes, taken as exact."""
+        return self._at_fixes(view, robust=False)
+
+    def worst_case(self, view: GuidanceView) -> Advice:
+        """The answer that holds wherever the players may be since their latest fixes."""
+        return self._at_fixes(view, robust=True)
+
+    def calibrated(self, view: GuidanceView) -> Advice:
+        """The answer where the trackers predict the players now (see the module's docstring)."""
+        estimate = self.estimate(view.fixes, view.now)
+        if estimate is None:
+            return Advice(note="waiting for both players' fixes")
+        return Advice.of(self.calibrated_answer(view.agent, estimate))
+
+    def _at_fixes(self, view: GuidanceView, robust: bool) -> Advice:
+        """The plain or robust answer for ``view``'s agent. It depends only
+        on the two latest fixes and the phase (and, for robust guidance, the
+        sets' radii, rounded up to ``RADIUS_STEP``), which change less often
+        than guidance goes out, so the last answer per agent is kept."""
+        agent, fixes, latest = view.agent, view.fixes, view.fixes.latest
         if self.attacker not in latest or self.defender not in latest:
-            return {"game": "ctf", "note": "waiting for both players' fixes"}
-        method = self.methods.get(agent, "none")
-        if method == "calibrated":
-            estimate = self.estimate(fixes, now)
-            if estimate is None:
-                return {"game": "ctf", "note": "waiting for both players' fixes"}
-            return self.calibrated_answer(agent, estimate)
+            return Advice(note="waiting for both players' fixes")
         a, d = latest[self.attacker][0], latest[self.defender][0]
-        radii = self.radii(fixes, now) if method == "worst-case" else None
+        radii = self.radii(fixes, view.now) if robust else None
         key = (a[0], a[1], d[0], d[1], self.phase, radii)
         held = self._last.get(agent)
         if held is None or held[0] != key:
-            held = self._last[agent] = (key, self.answer_at(agent, a, d, radii))
+            held = self._last[agent] = (key, Advice.of(self.answer_at(agent, a, d, radii)))
         return held[1]
 
     def estimate(self, fixes: LatestFixes, now: float) -> Estimate | None:
@@ -193,7 +206,6 @@ class CtfAdvisor:
     def calibrated_answer(self, agent: str, estimate: Estimate) -> dict:
         """The CTF fields of ``agent``'s calibrated guidance (see the module's docstring)."""
         sampled = self.sampled
-        assert sampled is not None  # made for the agents given calibrated guidance, as this one is
         try:
             a = self.placeable(estimate.attacker.position)
             d = self.placeable(estimate.defender.position)
@@ -241,17 +253,25 @@ class CtfAdvisor:
 
     def _margin(self, estimate: Estimate, value: float) -> tuple[float | None, str]:
         """The margin the attacker's go adds to ``value``, and what the phone is told of it."""
-        if self.calibration is None:
-            sampled = self.sampled
-            assert sampled is not None  # made for calibrated guidance
-            own = sampled.quantile(*self._samples(estimate), 1.0 - self.alpha, self.phase) - value
+        calibration = self.calibration()
+        if calibration is None:
+            own = self.sampled.quantile(*self._samples(estimate), 1.0 - self.alpha, self.phase) - value
             if "calibration" in self.ablate:
                 return own, "calibration switched off (guidance.ablate): the margin is the tracker's own"
             return own, "not calibrated yet: the margin is the tracker's own (bearcat calibrate)"
-        margin = self.calibration.margin(self.phase, estimate.age)
+        margin = calibration.margin(self.phase, estimate.age)
         if margin is None:
             return None, f"no go on reports {estimate.age:.1f} s old: the calibration has too few games that old"
         return margin, ""
+
+    def calibration(self) -> Calibration | None:
+        """The game's calibration, loaded at the first go that takes it; None
+        where there is none or ``guidance.ablate`` switches it off."""
+        if "calibration" in self.ablate or self._load is None:
+            return None
+        if self._loaded is None:
+            self._loaded = (self._load(),)
+        return self._loaded[0]
 
     def _region_near(self, mover: str, where: np.ndarray) -> list:
         """The opponent's region against ``mover`` at ``where``, as sent,
@@ -309,7 +329,6 @@ class CtfAdvisor:
 
     def _robust_answer(self, agent: str, a: np.ndarray, d: np.ndarray, radii) -> dict:
         robust = self.robust
-        assert robust is not None  # made for the agents given robust guidance, as this one is
         covers = {"attacker": robust.cover("attacker", a, radii[0]), "defender": robust.cover("defender", d, radii[1])}
         side = "attacker" if agent == self.attacker else "defender"
         answer = robust.answer(side, covers["attacker"], covers["defender"], self.phase)
@@ -353,7 +372,6 @@ class CtfAdvisor:
         held = self._regions.get(side)
         if held is None or held[0] != key:
             other = "defender" if side == "attacker" else "attacker"
-            assert self.robust is not None  # made for the agents given robust guidance, as this one is
             values = self.robust.region_values(other, self.robust.cover(side, where, coarse), self.phase)
             rings = on_the_wire(self.map, polygon_rings(self.solved.polygons(values, other)), self._simplify)
             held = self._regions[side] = (key, rings)
@@ -364,20 +382,3 @@ class CtfAdvisor:
         if self.solved.geometry.grid.contains(p) and not self.solved.blocked_at(p):
             return p
         return nearest_inside(self._inside, p)
-
-
-def _standing(where: np.ndarray, spread: float) -> Belief:
-    """A belief of a player standing at ``where``, ``spread`` metres wide: what a warm-up answers for."""
-    covariance = np.diag([spread**2, spread**2, 0.01, 0.01])
-    return Belief(
-        t=0.0,
-        position=where,
-        velocity=np.zeros(2),
-        covariance=covariance,
-        manoeuvre=0.0,
-        bias=np.zeros(2),
-        bias_covariance=np.eye(2),
-        weights=np.array([1.0]),
-        means=np.concatenate([where, np.zeros(2)])[None],
-        covariances=covariance[None],
-    )

@@ -5,7 +5,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty, nearest_inside
+from bearcat.agents.ground_station.guidance.fixes import Uncertainty, nearest_inside
+from bearcat.agents.ground_station.guidance.method import Advice, GuidanceView
 from bearcat.agents.ground_station.guidance.outlines import mask_rings, on_the_wire
 from bearcat.bus.messages import GameState
 from bearcat.maps import Map, rasterize
@@ -20,10 +21,13 @@ class ReachAvoidAdvisor:
     is the time to the last target along it. Solved on a grid of ``spacing``
     metres on each new fix of the attacker.
 
-    With ``robust``, each defender's capture disk grows by the radius its
-    last fix leaves it (``uncertainty``), so the safe set and go hold wherever the defenders may be; the
-    defenders' positions are then taken afresh once a second as well, as
-    their disks grow, and ``uncertain`` says the plain answer would differ."""
+    Its worst-case form grows each defender's capture disk by the radius
+    its last fix leaves it (``uncertainty``), so the safe set and go hold
+    wherever the defenders may be; the defenders' positions are then taken
+    afresh once a second as well, as their disks grow, and ``uncertain``
+    says the plain answer would differ."""
+
+    kind = "reach-avoid"
 
     def __init__(
         self,
@@ -35,7 +39,6 @@ class ReachAvoidAdvisor:
         speeds: dict,
         capture_radius: float,
         spacing: float,
-        robust: bool = False,
         uncertainty: Uncertainty | None = None,
     ) -> None:
         self.map = game_map
@@ -49,38 +52,45 @@ class ReachAvoidAdvisor:
         self.speed = {agent: v * raster.speed for agent, v in speeds.items()}
         self.uncertainty = uncertainty or Uncertainty(dict(speeds))
         self.capture_radius = capture_radius
-        self.robust = robust
         self.stage = 0
-        self._last: tuple[tuple, dict] | None = None
+        self._last: tuple[tuple, Advice] | None = None
 
     def state(self, message: GameState) -> None:
         self.stage = 0 if message.flag_holder is None else min(1, len(self.masks) - 1)
 
-    def warm_up(self, starts) -> None:
-        """Solve once with everyone at ``starts`` and keep nothing (see
-        ``GuidanceService.warm_up``)."""
-        self._answer(
-            [np.asarray(starts[a], float) for a in (self.attacker, *self.defenders)], [0.0] * len(self.defenders)
-        )
+    def warm_up(self) -> None:
+        """Nothing to load ahead: the solver's code is compiled at the first answer, which ``forget`` drops."""
 
-    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
-        latest = fixes.latest
-        if agent != self.attacker:
-            return {"game": "reach-avoid"}
+    def forget(self) -> None:
+        """Keep no answer (see ``GuidanceService.warm_up``)."""
+        self._last = None
+
+    def plain(self, view: GuidanceView) -> Advice:
+        """The attacker's answer at the defenders as last reported (a defender's phone shows positions only)."""
+        return self._advice(view, robust=False)
+
+    def worst_case(self, view: GuidanceView) -> Advice:
+        """The attacker's answer with each defender's capture disk grown by the radius its last fix leaves it."""
+        return self._advice(view, robust=True)
+
+    def _advice(self, view: GuidanceView, robust: bool) -> Advice:
+        latest, now = view.fixes.latest, view.now
+        if view.agent != self.attacker:
+            return Advice()
         if any(a not in latest for a in (self.attacker, *self.defenders)):
-            return {"game": "reach-avoid", "note": "waiting for every player's fixes"}
+            return Advice(note="waiting for every player's fixes")
         points = [latest[a][0] for a in (self.attacker, *self.defenders)]
         # A solve takes tens of milliseconds: redo it when the stage changes or
         # the attacker's own fix moves (once a fix period), taking the
         # defenders as last reported then; a defender's move shows at the
         # attacker's next fix. Robust answers are also redone each second.
         grown = [0.0] * len(self.defenders)
-        key: tuple = (self.stage, points[0].tobytes())
-        if self.robust:
+        key: tuple = (self.stage, points[0].tobytes(), robust)
+        if robust:
             grown = [self._radius(latest[d], d, now) for d in self.defenders]
             key += (int(now),)
         if self._last is None or self._last[0] != key:
-            self._last = (key, self._answer(points, grown))
+            self._last = (key, Advice.of(self._answer(points, grown)))
         return self._last[1]
 
     def _radius(self, held, defender: str, now: float) -> float:

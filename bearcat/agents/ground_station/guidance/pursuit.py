@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import shapely
 
-from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.guidance.method import Advice, GuidanceView
 from bearcat.agents.ground_station.guidance.outlines import on_the_wire
 from bearcat.bus.messages import GameState
 from bearcat.maps import Map
@@ -20,6 +20,8 @@ class PursuitAdvisor:
     pursuer without a boundary); ``value`` is the area of S_e in square
     metres."""
 
+    kind = "pursuit"
+
     def __init__(self, game_map: Map, *, evader: str, pursuers) -> None:
         from bearcat.solvers.pursuit.convex import area_minimising_headings, line_of_control, voronoi_cell
 
@@ -28,30 +30,29 @@ class PursuitAdvisor:
         ring = np.asarray(game_map.area.exterior.coords)[:-1]
         self.domain = ring if game_map.area.exterior.is_ccw else ring[::-1]
         self._headings, self._cell, self._line = area_minimising_headings, voronoi_cell, line_of_control
-        self._last: dict[str, tuple[tuple, dict]] = {}
+        self._last: dict[str, tuple[tuple, Advice]] = {}
 
     def state(self, message: GameState) -> None:
         pass
 
-    def warm_up(self, starts) -> None:
-        """Answer the first pursuer once with everyone at ``starts`` and keep
-        nothing (see ``GuidanceService.warm_up``)."""
-        self._answer(
-            self.pursuers[0],
-            np.asarray(starts[self.evader], float),
-            np.array([starts[p] for p in self.pursuers], float),
-        )
+    def warm_up(self) -> None:
+        """Nothing to load ahead: the solver's code is compiled at the first answer, which ``forget`` drops."""
 
-    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
-        latest = fixes.latest
+    def forget(self) -> None:
+        """Keep no answer (see ``GuidanceService.warm_up``)."""
+        self._last = {}
+
+    def plain(self, view: GuidanceView) -> Advice:
+        """A pursuer's answer at the positions as reported (the evader's phone shows positions only)."""
+        agent, latest = view.agent, view.fixes.latest
         if agent not in self.pursuers or any(a not in latest for a in (self.evader, *self.pursuers)):
-            return {"game": "pursuit", "note": "waiting for every player's fixes"}
+            return Advice(note="waiting for every player's fixes")
         e = latest[self.evader][0]
         ps = np.array([latest[p][0] for p in self.pursuers])
         key = (tuple(e), ps.tobytes())
         held = self._last.get(agent)
         if held is None or held[0] != key:
-            held = self._last[agent] = (key, self._answer(agent, e, ps))
+            held = self._last[agent] = (key, Advice.of(self._answer(agent, e, ps)))
         return held[1]
 
     def _answer(self, agent: str, e: np.ndarray, ps: np.ndarray) -> dict:

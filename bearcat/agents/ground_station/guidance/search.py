@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import msgspec
 import numpy as np
 
 from bearcat.agents.ground_station.guidance.ctf import CtfAdvisor
-from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.guidance.method import Advice, GuidanceView
 from bearcat.agents.ground_station.guidance.outlines import mask_rings, on_the_wire
 from bearcat.bus.messages import GameState
 from bearcat.solvers.errors import InputError
@@ -21,6 +22,8 @@ class SearchAdvisor:
     it is worth; with robust guidance the answer also holds wherever the
     attacker may be since its own last fix."""
 
+    kind = "search"
+
     def __init__(self, ctf: CtfAdvisor, tasker, side) -> None:
         self.ctf = ctf
         self.tasker = tasker
@@ -31,19 +34,37 @@ class SearchAdvisor:
     def state(self, message: GameState) -> None:
         self.ctf.state(message)
 
-    def warm_up(self, starts) -> None:
-        self.ctf.warm_up(starts)
+    def warm_up(self) -> None:
+        self.ctf.warm_up()
 
-    def __call__(self, agent: str, fixes: LatestFixes, now: float) -> dict:
-        fields = {**self.ctf(agent, fixes, now), "game": "search"}
-        if agent in self.side:
-            fields["possible"] = self._possible()
-            if self.ctf.attacker in fixes.latest:
-                robust = self.ctf.methods.get(agent) == "worst-case"
-                # The worst of P_D is looked for again when the attacker's set grows by half a cell.
-                radius = self.ctf.coarse(self.ctf.radius(self.ctf.attacker, fixes, now)) if robust else None
-                fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0], radius))
-        return fields
+    def forget(self) -> None:
+        self.ctf.forget()
+        self._drawn = (-1, [])
+        self._worst = ((), None)
+
+    def plain(self, view: GuidanceView) -> Advice:
+        """The CTF answer at the fixes, and P_D with the answer against its worst."""
+        return self._searching(view, self.ctf.plain(view), robust=False)
+
+    def worst_case(self, view: GuidanceView) -> Advice:
+        """The robust CTF answer, and P_D with the answer against its worst wherever the attacker may be."""
+        return self._searching(view, self.ctf.worst_case(view), robust=True)
+
+    def calibrated(self, view: GuidanceView) -> Advice:
+        """The calibrated CTF answer, and P_D with the answer against its worst."""
+        return self._searching(view, self.ctf.calibrated(view), robust=False)
+
+    def _searching(self, view: GuidanceView, advice: Advice, robust: bool) -> Advice:
+        """``advice``, for an agent of the side that flies the UAVs with what they search for."""
+        agent, fixes = view.agent, view.fixes
+        if agent not in self.side:
+            return advice
+        fields: dict = {"possible": self._possible()}
+        if self.ctf.attacker in fixes.latest:
+            # The worst of P_D is looked for again when the attacker's set grows by half a cell.
+            radius = self.ctf.coarse(self.ctf.radius(self.ctf.attacker, fixes, view.now)) if robust else None
+            fields.update(self._against_the_worst(agent, fixes.latest[self.ctf.attacker][0], radius))
+        return msgspec.structs.replace(advice, **fields)
 
     def _against_the_worst(self, agent: str, a: np.ndarray, radius: float | None) -> dict:
         key = (agent, a[0], a[1], radius, self.tasker.picture.updates, self.ctf.phase, self.ctf.solved)
@@ -65,7 +86,6 @@ class SearchAdvisor:
     def _defender_values(self, a: np.ndarray, radius: float) -> np.ndarray:
         """Over defender positions, the value against the worst of where the attacker may be."""
         robust = self.ctf.robust
-        assert robust is not None  # made for the agents given robust guidance, as this one is
         return robust.region_values("defender", robust.cover("attacker", self.ctf.placeable(a), radius), self.ctf.phase)
 
     def _possible(self) -> list:

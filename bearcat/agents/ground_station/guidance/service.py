@@ -4,9 +4,9 @@ For each agent, on each of its new fixes and at least ten times a second
 (the scenario's rate), it takes the latest fix of every agent, as the
 ground-station laptop of thesis 3.5 did, and sends that agent a
 ``Guidance``: every agent as last reported, with the disk it may be in by
-now (``uncertainty``), and for an aided agent its advisor's
-answer at those positions. An unaided agent's phone shows
-positions only.
+now (``uncertainty``), and for an aided agent what its guidance method
+advises (``method``), held to the method's budget by a guard. An unaided
+agent's phone shows positions only.
 
 In a game of limited visibility (a ``Sight``), each agent is told only
 what its side has seen: its teammates and their UAVs always, an opponent
@@ -20,16 +20,26 @@ from __future__ import annotations
 from collections.abc import Callable, Iterable
 from typing import Any
 
+import msgspec
 import numpy as np
 
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes
+from bearcat.agents.ground_station.guidance.method import (
+    NO_ADVICE,
+    Advice,
+    GuidanceMethod,
+    GuidanceView,
+    advice_problem,
+)
 from bearcat.agents.ground_station.tracker import Trackers
+from bearcat.agents.guard import Guard, PluginFault
 from bearcat.agents.protocol import Send
 from bearcat.bus import keys
 from bearcat.bus.messages import Detection, Fix, GameState, Guidance, Message
 from bearcat.maps import Map
 
 SPOTTED_FOR = 2.0  # s an agent's screen says a UAV saw it
+WARM_UP_ACCURACY = 1.0  # m per axis: the fixes of the warm-up answer, so worst-case answers cover disks
 
 
 class GuidanceService:
@@ -37,9 +47,12 @@ class GuidanceService:
     agent arrives (so a phone's answer follows its own fix at once, and no
     faster than its fixes come), and at the scenario's ``rate`` whenever a
     period passed without one (so it also follows the others' moves).
-    ``advisor(agent, fixes, now)`` adds the solver's part for an aided agent
-    (None: positions only). ``tracking``, where some guidance is
-    calibrated, makes the trackers each view of the fixes keeps."""
+    ``methods`` holds each aided agent's guidance method (None where it
+    could not be made: that phone shows no advice) and the guard it is
+    called through; it answers from ``advisor``, the game's. An agent
+    without one sees positions only. ``tracking``, where some
+    method reads the trackers' beliefs, makes the trackers each view of
+    the fixes keeps."""
 
     role = "ground-station"
     watches: tuple[str, ...] = ()
@@ -51,7 +64,9 @@ class GuidanceService:
         agents,
         *,
         advisor=None,
-        aided=None,
+        methods: dict[str, tuple[GuidanceMethod | None, Guard]] | None = None,
+        teams: dict[str, str] | None = None,
+        speeds: dict[str, float] | None = None,
         rate: float = 10.0,
         name: str = keys.GROUND,
         sight=None,
@@ -61,7 +76,11 @@ class GuidanceService:
         self.game, self.name, self.map = game, name, game_map
         self.agents = tuple(agents)
         self.advisor = advisor
-        self.aided = dict(aided or {})
+        self.methods = dict(methods or {})
+        self.teams = dict(teams or {})
+        self.speeds = dict(speeds or {})
+        # The guards' faults, which the runtime records: those of making the methods first.
+        self.events: list[PluginFault] = [f for _, guard in self.methods.values() for f in guard.faults]
         self.uncertainty = uncertainty
         self.period = 1.0 / rate
         self.ended = False
@@ -73,6 +92,7 @@ class GuidanceService:
         def view() -> LatestFixes:
             return LatestFixes(game_map, None if tracking is None else tracking())
 
+        self._fresh = view
         self.fixes = view()
         self.known = {a: view() for a in self.agents} if sight is not None else None
         self.spotted: dict[str, tuple[str, float]] = {}  # agent -> (UAV that saw it, when)
@@ -83,14 +103,27 @@ class GuidanceService:
         return []
 
     def warm_up(self, starts) -> None:
-        """Have the advisor answer once with the agents at ``starts`` (agent ->
-        map point), keeping nothing. A process's first answer loads compiled
-        solver and query code from numba's cache (a fifth to a third of a
-        second in every game measured) or, after a fresh clone, compiles it
-        (two seconds for capture-the-flag); the ground station does this
-        before it says it is up, so no fix of the game waits for it."""
-        if self.advisor is not None:
-            self.advisor.warm_up(starts)
+        """Run the advisor's compiled code, then have each aided agent's
+        method answer once with every agent standing at ``starts`` (agent
+        -> map point), reported at time 0 on fixes of their own that are
+        then dropped. A process's first answer loads compiled solver and
+        query code from numba's cache (a fifth to a third of a second in
+        every game measured) or, after a fresh clone, compiles it (two
+        seconds for capture-the-flag); the ground station does this before
+        it says it is up, so no fix of the game waits for it, and this
+        first call of each method is the one its guard holds to no budget.
+        The advisor then forgets those answers; a method of one's own that
+        keeps state has seen this one call."""
+        if self.advisor is None:
+            return
+        self.advisor.warm_up()
+        standing = self._fresh()
+        for agent, where in starts.items():
+            lat, lon = self.map.to_geodetic(*where)
+            standing.take(Fix(agent=agent, seq=0, t=0.0, lat=lat, lon=lon, accuracy=WARM_UP_ACCURACY))
+        for agent in self.methods:
+            self._advise(agent, standing, 0.0)
+        self.advisor.forget()
 
     def handle(self, key: str, message: Message, now: float) -> list[Send]:
         if isinstance(message, Fix):
@@ -132,6 +165,17 @@ class GuidanceService:
         due = [a for a in self.agents if now - self._last[a] >= self.period - 1e-9]
         return self._send(due, now)
 
+    def _advise(self, agent: str, fixes: LatestFixes, now: float) -> Advice:
+        """What ``agent``'s method advises from ``fixes`` at ``now``; no advice where it failed."""
+        method, guard = self.methods[agent]
+        if method is None:
+            return NO_ADVICE
+        view = GuidanceView(agent, self.teams.get(agent, ""), now, self.map, fixes, self.advisor, self.speeds)
+        before = len(guard.faults)
+        advice = guard.call(now, method.advise, view, check=advice_problem, fallback=NO_ADVICE)
+        self.events += guard.faults[before:]
+        return advice
+
     def _share(self, fix: Fix, known: dict[str, LatestFixes]) -> None:
         """Tell whoever may know of ``fix`` (in ``known``, what each agent knows):
         its side; and, if it is in line of sight of an opponent, that opponent,
@@ -157,8 +201,8 @@ class GuidanceService:
         for agent in agents:
             fixes = self.fixes if self.known is None else self.known[agent]
             fields: dict[str, Any] = {"game": "none"}
-            if self.advisor is not None and self.aided.get(agent):
-                fields = self.advisor(agent, fixes, now)
+            if agent in self.methods:
+                fields = {"game": self.advisor.kind, **msgspec.structs.asdict(self._advise(agent, fixes, now))}
             spotted = self.spotted.get(agent)
             if spotted is not None and now - spotted[1] <= SPOTTED_FOR:
                 fields = {**fields, "seen_by": [spotted[0]]}
