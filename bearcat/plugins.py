@@ -26,12 +26,18 @@ and the class subclasses ``Behaviour``::
         def decide(self, now, me, screen, situation):
             return situation.navigator.toward(situation.goal, me)
 
-A UAV tasking policy is the same, a ``TaskingPolicy`` subclass a UAV's
-table names (``search = "mine.py:Spiral"``, ``search_options = {...}``),
-whose ``next_point(uav, view)`` answers where the UAV searches next.
+A guidance method is the same, a ``GuidanceMethod`` subclass that
+``[guidance] method`` (or an agent's own ``guidance`` key) names, with its
+``options``: its ``advise(view)`` answers what one aided phone is told,
+an ``Advice``, from the latest fixes, the trackers' beliefs and the
+game's advisor's own answers. A UAV tasking policy is a
+``TaskingPolicy`` subclass a UAV's table names (``search =
+"mine.py:Spiral"``, ``search_options = {...}``), whose ``next_point(uav,
+view)`` answers where the UAV searches next.
 
 A game of one's own subclasses ``Game``: its rules type, its two teams,
-the forms its guidance has, and its referee, guidance service and people
+the forms of answer its advisor gives and its default guidance method,
+and its referee, guidance service and people
 (see the built-in ones in ``bearcat.scenarios.cast``); ``game = "..."``
 names it.
 
@@ -39,6 +45,9 @@ A distribution makes a short name of any of these with an entry point::
 
     [project.entry-points."bearcat.behaviours"]
     sneaky = "mypkg.tactics:Sneaky"
+
+    [project.entry-points."bearcat.guidance"]
+    intercept = "mypkg.guidance:Intercept"
 
     [project.entry-points."bearcat.tasking"]
     spiral = "mypkg.uav:Spiral"
@@ -52,9 +61,17 @@ check SCENARIO`` imports and checks what a scenario names.
 A plug-in is untrusted code in a peer that must not die: an exception, an
 answer its protocol does not allow, or a live call past its budget is
 logged in one sentence, counted, recorded as a ``plugin`` event that
-``bearcat check`` judges, and that tick the agent stands still.
+``bearcat check`` judges, and that tick the agent stands still (or its
+phone shows no advice, or its UAV keeps its last task).
 """
 
+from bearcat.agents.ground_station.guidance.method import (
+    GUIDANCE_METHODS,
+    TRACKS,
+    Advice,
+    GuidanceMethod,
+    GuidanceView,
+)
 from bearcat.agents.ground_station.tasking import NEEDS_SETS, TASKING, SearchView, TaskingPolicy, Uav
 from bearcat.agents.guard import PluginFault
 from bearcat.agents.human.behaviour import (
@@ -83,26 +100,32 @@ from bearcat.agents.options import (
     Share,
 )
 from bearcat.agents.registry import Entry, PluginError, Registry
+from bearcat.maps.geodesy import bearing
 from bearcat.scenarios.game import GAMES, Game
 
-REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS, TASKING, GAMES)
+REGISTRIES: tuple[Registry, ...] = (BEHAVIOURS, GUIDANCE_METHODS, TASKING, GAMES)
 """Every kind of plug-in, each its registry."""
 
 __all__ = [
     "BEHAVIOURS",
     "COMMITS",
     "GAMES",
+    "GUIDANCE_METHODS",
     "NEEDS_SETS",
     "REGISTRIES",
     "TAKES_KEYS",
     "TASKING",
     "TELLS",
+    "TRACKS",
+    "Advice",
     "Angle",
     "Behaviour",
     "Commits",
     "Distance",
     "Entry",
     "Game",
+    "GuidanceMethod",
+    "GuidanceView",
     "Lag",
     "Memory",
     "Navigator",
@@ -123,4 +146,5 @@ __all__ = [
     "TaskingPolicy",
     "Tells",
     "Uav",
+    "bearing",
 ]

@@ -37,6 +37,19 @@ pytestmark = [
 
 HEADING = 330.0  # degrees the phone's top edge points to, through the orientation sensor
 START = (25.0, 22.0)  # the attacker's start in the scenario
+TOLD = """
+from msgspec.structs import replace
+
+from bearcat.plugins import GuidanceMethod
+
+
+class Told(GuidanceMethod):
+    needs = frozenset({"plain"})
+
+    def advise(self, view):
+        return replace(view.answers.plain(view), note="told by a method of one's own")
+"""
+"""The guidance method the game's phones are told by: the thesis's answer, with a line of its own."""
 STEP = (-0.3, 0.35)  # metres per half second: up and to the left, towards home
 
 
@@ -48,6 +61,8 @@ def _path(k: int) -> tuple[float, float]:
 def played(tmp_path_factory):
     base = tmp_path_factory.mktemp("browser")
     path = write_scenario(base, time_limit=20.0, netem="ideal")
+    (base / "told.py").write_text(TOLD)
+    path.write_text(path.read_text().replace('method = "none"', 'method = "told.py:Told"'))
     scenario = load_scenario(path)
     out, shots = base / "run", base / "shots"
     shots.mkdir()
@@ -160,6 +175,7 @@ def test_the_pages_fixes_follow_the_walk_with_the_phones_heading(played):
 def test_the_screen_shows_the_opponent_the_guidance_and_a_bad_fix_dropped_and_counted(played):
     shown = played["playing"]
     assert "running" in shown and "online" in shown and "defender" in shown
+    assert "told by a method of one's own" in shown
     assert "1 fixes dropped" in shown
     refused = [e for e in read_events(played["out"] / "peers" / "attacker.jsonl") if e["event"] == "refused"]
     assert len(refused) == 1 and "lat" in refused[0]["reason"]

@@ -13,14 +13,13 @@ import json
 import math
 import os
 import re
-import subprocess
-import sys
 import textwrap
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from bearcat.agents.ground_station.guidance.method import GUIDANCE_METHODS
 from bearcat.agents.ground_station.tasking import TASKING
 from bearcat.agents.guard import Guard
 from bearcat.agents.human.behaviour import BEHAVIOURS, direction_problem
@@ -29,12 +28,12 @@ from bearcat.scenarios.game import GAMES
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
 from bearcat.suites.checker import check_run
 from tests.support.scenario_files import scenario_text
+from tests.support.users import bearcat, install_tactics
 
 pytestmark = pytest.mark.xdist_group("plugins")  # the example package is installed once, for the module
 
 ROOT = Path(__file__).resolve().parent.parent
 PAGE = ROOT / "docs" / "your-own-agents.md"
-BEARCAT = str(Path(sys.executable).with_name("bearcat"))  # the console script a user types
 
 
 def page_block(language: str) -> str:
@@ -51,17 +50,6 @@ def with_attacker(table: str, **kw) -> str:
     return text[:start] + table + "\n" + text[text.index("[[agent]]", start + 1) :]
 
 
-def bearcat(*words, cwd: Path, env: dict | None = None, timeout: float = 600) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        [BEARCAT, *map(str, words)],
-        cwd=cwd,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=os.environ | (env or {}) | {"PYTHONUNBUFFERED": "1"},
-    )
-
-
 @pytest.fixture(scope="module")
 def folder(tmp_path_factory) -> Path:
     """A user's folder: the page's class in ``sidestep.py`` and the page's table in a copy of the fake-out."""
@@ -73,17 +61,7 @@ def folder(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def tactics(tmp_path_factory) -> Path:
-    """The example distribution, installed by pip into a folder of its own (PYTHONPATH), not the environment."""
-    target = tmp_path_factory.mktemp("site")
-    done = subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--no-deps", "--no-build-isolation", "--no-index", "-q"]
-        + ["--target", str(target), str(ROOT / "examples" / "bearcat-tactics")],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert done.returncode == 0, done.stderr
-    return target
+    return install_tactics(tmp_path_factory.mktemp("site"))
 
 
 # ---------------------------------------------------------------- finding them
@@ -217,8 +195,13 @@ def _table(behaviour: str, options: str = "") -> str:
 
 @pytest.mark.parametrize(
     "registry, about",
-    [(BEHAVIOURS, "behaviour"), (TASKING, "search|strateg|polic"), (GAMES, "game")],
-    ids=["behaviours", "tasking", "games"],
+    [
+        (BEHAVIOURS, "behaviour"),
+        (GUIDANCE_METHODS, "guidance|method|uncertain|robust|calibrat"),
+        (TASKING, "search|strateg|polic"),
+        (GAMES, "game"),
+    ],
+    ids=["behaviours", "guidance", "tasking", "games"],
 )
 def test_no_plugins_name_is_compared_outside_its_registry(registry, about):
     """A plug-in is reached through its entry and its declared traits,

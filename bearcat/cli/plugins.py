@@ -6,7 +6,7 @@ where it comes from and its summary; an entry point that fails to load is
 listed with the sentence saying why, and the exit code is 1.
 
 ``check SCENARIO`` reads the scenario, which imports every plug-in it names
-(each agent's behaviour, each UAV's tasking policy) and reads each one's
+(each agent's behaviour and guidance method, each UAV's tasking policy) and reads each one's
 options into its type, then makes each plug-in once as a game would, with
 the same seeded generator, without playing: exit 0 when all of them load, 2 with one
 sentence naming the culprit when the scenario cannot be read, 1 when a
@@ -26,8 +26,8 @@ from bearcat.cli.output import Output
 def register(commands: Commands) -> None:
     p = commands.add_parser(
         "plugins",
-        description="List the behaviours, UAV tasking policies and games, built-in and installed, that "
-        "scenarios may name, or check what one names.",
+        description="List the behaviours, guidance methods, UAV tasking policies and games, built-in and "
+        "installed, that scenarios may name, or check what one names.",
     )
     verbs = p.add_subparsers(dest="verb", metavar="VERB", required=True)
     listing = verbs.add_parser("list", help="every registered plug-in, with where it comes from")
@@ -79,6 +79,9 @@ def run_check(args) -> int:
     game = scenario.game_entry
     found = [_made(out, "scenario", "game", game, scenario.rules, lambda: game.factory(scenario), "its rules ")]
     plugged = [(a.id, "behaviour", scenario.behaviour_of(a.id), a.id, "behaviour") for a in scenario.agents]
+    plugged += [
+        (a.id, "guidance method", scenario.guidance_of(a.id), a.id, "guidance") for a in scenario.agents if a.aided
+    ]
     plugged += [(u.id, "tasking policy", scenario.tasking_of(u.id), TASKER, "tasking") for u in scenario.uavs]
     for who, kind, chosen, drawer, purpose in plugged:
         make = functools.partial(chosen.entry.factory, chosen.options, stream(scenario.seed, drawer, purpose))

@@ -426,7 +426,9 @@ def _known(scenario, agent: str, ids, what: str) -> None:
 
 
 def _ground_station(spec: PeerSpec, world: World) -> _Cast:
-    players = world.cast(people=[], ground=True, judge=spec.judge, provisional=spec.provisional)
+    players = world.cast(
+        people=[], ground=True, judge=spec.judge, provisional=spec.provisional, clock=time.perf_counter
+    )
     assert players.guidance is not None  # a cast with its ground station
     return _Cast(players.ground, players)
 

@@ -149,8 +149,9 @@ def build_cast(
     ground station whose sets are not in the cache answers from coarser
     ones, solved at once, and names the sets it awaits (``Cast.awaited``);
     the other games solve in well under a second and ignore it. ``clock``
-    is what the people's behaviours are held to their budget on (live runs:
-    the wall clock; None, in simulation: no budget, see ``agents.guard``)."""
+    is what the plug-ins (behaviours, guidance methods, tasking policies)
+    are held to their budgets on (live runs: the wall clock; None, in
+    simulation: no budget, see ``agents.guard``)."""
     game = scenario.game_entry.factory(scenario, provisional=provisional, seed=seed, clock=clock)
     if scenario.uavs and not isinstance(game, _CtfGame):
         raise ScenarioError(f"{scenario.source}: UAVs fly in capture-the-flag games only")

@@ -104,6 +104,7 @@ class Run:
         self.events = self._read(directory / "events.jsonl")
         self.peer_logs = {p.stem: self._read(p) for p in sorted((directory / "peers").glob("*.jsonl"))}
         self.outcome = self._outcome()
+        self.unreadable: str | None = None  # why scenario.toml could not be read here, if it could not
         self.scenario = self._scenario()
         self.live = (directory / "peers").is_dir()
         self.kernel = (directory / "network.json").exists()
@@ -157,7 +158,8 @@ class Run:
             return None
         try:
             return parse_scenario(path.read_text(encoding="utf-8"), source=str(path))
-        except ScenarioError:
+        except ScenarioError as exc:  # a plug-in it names that this environment cannot import, say
+            self.unreadable = str(exc)
             return None
 
 
@@ -211,6 +213,8 @@ def _reliable(run: Run) -> Finding:
 
 
 def _verdict(run: Run) -> Finding:
+    if run.unreadable is not None:
+        return Finding("verdict", None, f"the scenario cannot be read here to judge it by: {run.unreadable}")
     if run.outcome is None or run.scenario is None:
         return Finding("verdict", None, "no outcome or no scenario.toml to judge it by")
     reason, winner = run.outcome.get("reason", ""), run.outcome.get("winner")

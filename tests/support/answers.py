@@ -12,7 +12,7 @@ def answering(advisor, form: str = "plain"):
     fills, less those it leaves empty (None, no lines, no note)."""
 
     def answer(agent, fixes, now):
-        view = GuidanceView(agent, "", now, fixes.map, fixes, advisor, {})
+        view = GuidanceView(agent, now, fixes.map, fixes, advisor, {}, {})
         fields = msgspec.structs.asdict(getattr(advisor, form)(view))
         return {"game": advisor.kind} | {k: v for k, v in fields.items() if v is not None and v != [] and v != ""}
 

@@ -13,8 +13,10 @@ saw and what each phone showed, on one time line.
   received: the opponent's winning region, the heading ring's arrow, the
   agents as last reported with their disks and the reports' ages (and,
   with calibrated guidance, the trackers' ellipses), where an
-  unseen opponent may be (P_D), an alert when a UAV saw this agent, and a
-  note when the advice is uncertain (the robust and the plain answers differ);
+  unseen opponent may be (P_D), an alert when a UAV saw this agent, a
+  note when the advice is uncertain (the robust and the plain answers
+  differ), and each new line the guidance method puts on the screen
+  (``note``: "no advice" where it failed, or what a method of one's own says);
 - ``game``: the referee's states as a text log, and the solver's value
   shown to each phone as a plot.
 
@@ -110,6 +112,7 @@ def write_recording(
     to_local = _converter(game_map)
     markers = _Markers(rr, game_map, teams or {}, flying)
     phones: list[str] = []
+    notes: dict[str, str] = {}  # agent -> the note its screen shows
 
     for root in FIELD_ROOTS:
         rec.log(root, _north_up(rr), static=True)
@@ -161,6 +164,10 @@ def write_recording(
                 if m["agent"] not in phones:
                     phones.append(m["agent"])
                 _log_screen(rec, rr, m, to_local, markers)
+                if m.get("note", "") != notes.get(m["agent"], ""):
+                    notes[m["agent"]] = m.get("note", "")
+                    said = notes[m["agent"]] or "(no note)"
+                    rec.log(f"phone/{m['agent']}/note", rr.TextLog(f"{m['agent']}'s phone says: {said}"))
             elif m["type"] == "fix" and e["receiver"] == GROUND:
                 _log_fix(rec, rr, m, to_local, markers)
     rrd_path = Path(rrd_path)

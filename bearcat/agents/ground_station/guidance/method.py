@@ -73,16 +73,26 @@ class GuidanceView:
     advisor, whose forms a method may build on, each an ``Advice`` for
     the view: ``answers.plain(view)`` in every game, and where the game
     gives them (its class's ``answers``), ``answers.worst_case(view)`` and
-    ``answers.calibrated(view)``; ``team`` the agent's team and
+    ``answers.calibrated(view)``; ``teams`` every person's team and
     ``speeds`` every agent's top speed (m/s)."""
 
     agent: str
-    team: str
     now: float
     map: Map
     fixes: LatestFixes
     answers: Any
+    teams: dict[str, str]
     speeds: dict[str, float]
+
+    @property
+    def team(self) -> str:
+        """The team of the agent answered."""
+        return self.teams[self.agent]
+
+    @property
+    def opponents(self) -> list[str]:
+        """The people of the other team."""
+        return [who for who, team in self.teams.items() if team != self.team]
 
     def position(self, who: str) -> np.ndarray | None:
         """``who``'s last reported position (east, north, map metres); None before its first fix."""

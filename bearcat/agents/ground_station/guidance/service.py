@@ -170,7 +170,7 @@ class GuidanceService:
         method, guard = self.methods[agent]
         if method is None:
             return NO_ADVICE
-        view = GuidanceView(agent, self.teams.get(agent, ""), now, self.map, fixes, self.advisor, self.speeds)
+        view = GuidanceView(agent, now, self.map, fixes, self.advisor, self.teams, self.speeds)
         before = len(guard.faults)
         advice = guard.call(now, method.advise, view, check=advice_problem, fallback=NO_ADVICE)
         self.events += guard.faults[before:]
