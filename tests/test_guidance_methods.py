@@ -260,3 +260,10 @@ def test_the_examples_intercept_plays_a_20_game_study_against_the_builtin_guidan
     results = [json.loads(line) for line in (tmp_path / "mine" / "results.jsonl").read_text().splitlines()]
     assert len(results) == 20 and all("intercept" in r["key"] for r in results)
     assert {r["winner"] for r in results} <= {"attacker", "defender"} and all(r["reason"] for r in results)
+
+
+def test_the_docs_page_shows_the_examples_method_as_it_is():
+    page = (Path(__file__).resolve().parent.parent / "docs" / "your-own-agents.md").read_text()
+    shown = page.split("```python\nclass Intercept(GuidanceMethod):")[1].split("```")[0]
+    example = Path(__file__).resolve().parent.parent / "examples" / "bearcat-tactics" / "bearcat_tactics"
+    assert "class Intercept(GuidanceMethod):" + shown in (example / "intercept.py").read_text()
