@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import functools
 import logging
 import signal
 import threading
@@ -96,174 +97,201 @@ async def run_peer(
     once they are in the cache, which ``say`` is told of; ``warm_up()``
     (``Cast.warm_up``) is run off the event loop before the peer says it is
     up, so that the game starts with the guidance ready."""
-    loop = asyncio.get_running_loop()
-    clock = WallClock()
-    record = record or EventLog(None)
-    dispatch = Dispatcher(record, clock.now)
-    finished = asyncio.Event()
-    why = {"reason": "stopped"}
+    peer = PeerRun(agents, session, game, shim=shim, record=record, faults=faults, network=network, lease=lease)
+    return await peer.run(awaited=awaited, adopt=adopt, say=say, warm_up=warm_up)
 
-    def handler(agent):
-        def handle(key, payload, sender):
-            if session.closed:  # held by the shim past the end of the peer
-                return
-            message = dispatch.receive(agent, key, payload, sender)
-            if isinstance(message, GameState) and message.phase == "ended" and not finished.is_set():
-                why["reason"] = f"game ended: {message.reason}"
-                loop.call_later(LINGER, finished.set)
-            if isinstance(message, Control) and message.command == "start" and shim is not None:
-                shim.epoch = message.t  # outage windows count from the start, on the launcher's clock
-            if isinstance(message, Control) and message.command == "stop":
-                why["reason"] = f"stopped by the launcher: {message.reason}"
-                loop.call_later(LINGER, finished.set)
 
-        def arrived(key, payload, sender):
-            now = clock.now()
-            if shim is None:
-                handle(key, payload, sender)
-                return
-            for d in shim.transmit(sender, agent.name, key, payload, now, token=(agent.name, key, sender)):
-                loop.call_later(max(d.at - now, 0.0), handle, key, d.payload, sender)
+class PeerRun:
+    """One peer's agents on its ``session``, on the wall clock and the
+    running event loop: what it hears goes through the ``shim`` (if the
+    peer emulates its network) to the agents' handlers, fault notices of
+    the plan ``faults`` are applied where they fall on this peer, and a
+    player's peer watches the ground station for ``lease`` seconds (see
+    ``run_peer``)."""
 
-        return handle, arrived
+    def __init__(
+        self,
+        agents,
+        session,
+        game: str,
+        *,
+        shim: Shim | None = None,
+        record: EventLog | None = None,
+        faults: tuple = (),
+        network: str = "shim",
+        lease: float | None = None,
+    ) -> None:
+        self.agents, self.session, self.game = list(agents), session, game
+        self.shim, self.faults, self.network, self.lease = shim, faults, network, lease
+        self.loop = asyncio.get_running_loop()
+        self.clock = WallClock()
+        self.record = record or EventLog(None)
+        self.dispatch = Dispatcher(self.record, self.clock.now)
+        self.finished = asyncio.Event()
+        self.why = "stopped"
+        self.soon = Handoff(self.loop).put  # from Zenoh's threads; what arrives while the peer shuts down is dropped
+        session.on_refused = lambda *refusal: self.soon(self._refused, *refusal)
+        self.handles: dict[str, Callable] = {}
+        for agent in self.agents:
+            self._attach(agent)
+        self.notices = Inbox(session.name)
+        if faults:
+            session.subscribe(keys.fault(game), lambda k, p, s: self.soon(self._on_notice, k, p, s))
+        self.orphaned: dict[str, asyncio.TimerHandle] = {}
+        if lease is not None and all(agent.role in ("walker", "phone") for agent in self.agents):
+            session.subscribe_liveliness(
+                keys.alive(game, "ground-station", GROUND), lambda k, alive: self.soon(self._ground, k, alive)
+            )
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            try:
+                self.loop.add_signal_handler(sig, self._interrupted)
+            except (NotImplementedError, RuntimeError):  # not the main thread
+                pass
 
-    def watched(agent, key, alive) -> None:
-        if not session.closed:  # tokens vanish as the peer's own session closes
-            dispatch.peer(agent, key, alive)
+    async def run(self, *, awaited=None, adopt=None, say=None, warm_up=None) -> str:
+        """Ready the guidance (``warm_up``), say the agents are up, tick them
+        until the game ends, taking up the ``awaited`` sets on the way; why
+        it stopped (see ``run_peer``)."""
+        if warm_up is not None:
+            await self._warm(warm_up)  # before the tokens: the launcher starts the game once every peer is up
+        for agent in self.agents:
+            self.session.declare_token(keys.alive(self.game, agent.role, agent.name))
+        tasks = [asyncio.create_task(self._ticker(a)) for a in self.agents]
+        if awaited is not None:
+            tasks.append(asyncio.create_task(self._take_up(awaited, adopt, say)))
+        if self.shim is not None and (self.shim.dead_zones is not None or self.faults):
+            tasks.append(asyncio.create_task(self._poller(self.shim)))
+        try:
+            await self.finished.wait()
+        finally:
+            for t in tasks:
+                t.cancel()
+            await asyncio.gather(*tasks, return_exceptions=True)
+            self.session.close()
+            self.record.close()
+        if self.dispatch.failures:
+            counts = ", ".join(f"{name} {n}" for name, n in sorted(self.dispatch.failures.items()))
+            return f"{self.why}; agent failures: {counts}"
+        return self.why
 
-    soon = Handoff(loop).put  # from Zenoh's threads; what arrives while the peer shuts down is dropped
-
-    def refused(key, claimed, category, reason):
-        dispatch.unbelieved(session.name, key, claimed, f"{category}: {reason}")
-
-    session.on_refused = lambda *refusal: soon(refused, *refusal)
-
-    handles = {}
-    for agent in agents:
-        dispatch.attach(agent, session)
-        handle, arrived = handler(agent)
-        handles[agent.name] = handle
+    def _attach(self, agent) -> None:
+        """Subscribe ``agent`` to what it hears, through the shim, and to what it watches."""
+        self.dispatch.attach(agent, self.session)
+        self.handles[agent.name] = functools.partial(self._handle, agent)
+        arrived = functools.partial(self._arrived, agent)
         for expr in agent.subscriptions:
-            session.subscribe(expr, lambda k, p, s, arrived=arrived: soon(arrived, k, p, s))
+            self.session.subscribe(expr, lambda k, p, s: self.soon(arrived, k, p, s))
         for expr in agent.watches:
-            session.subscribe_liveliness(expr, lambda k, alive, a=agent: soon(watched, a, k, alive))
+            self.session.subscribe_liveliness(expr, lambda k, alive, a=agent: self.soon(self._watched, a, k, alive))
 
-    def on_notice(key, payload, sender):
-        notice = notices.accept(key, payload)
-        if not isinstance(notice, FaultNotice) or sender != LAUNCHER or notice.fault >= len(faults):
+    def _handle(self, agent, key, payload, sender) -> None:
+        if self.session.closed:  # held by the shim past the end of the peer
+            return
+        message = self.dispatch.receive(agent, key, payload, sender)
+        if isinstance(message, GameState) and message.phase == "ended" and not self.finished.is_set():
+            self.why = f"game ended: {message.reason}"
+            self.loop.call_later(LINGER, self.finished.set)
+        if isinstance(message, Control) and message.command == "start" and self.shim is not None:
+            self.shim.epoch = message.t  # outage windows count from the start, on the launcher's clock
+        if isinstance(message, Control) and message.command == "stop":
+            self.why = f"stopped by the launcher: {message.reason}"
+            self.loop.call_later(LINGER, self.finished.set)
+
+    def _arrived(self, agent, key, payload, sender) -> None:
+        now = self.clock.now()
+        if self.shim is None:
+            self._handle(agent, key, payload, sender)
+            return
+        for d in self.shim.transmit(sender, agent.name, key, payload, now, token=(agent.name, key, sender)):
+            self.loop.call_later(max(d.at - now, 0.0), self._handle, agent, key, d.payload, sender)
+
+    def _watched(self, agent, key, alive) -> None:
+        if not self.session.closed:  # tokens vanish as the peer's own session closes
+            self.dispatch.peer(agent, key, alive)
+
+    def _refused(self, key, claimed, category, reason) -> None:
+        self.dispatch.unbelieved(self.session.name, key, claimed, f"{category}: {reason}")
+
+    def _on_notice(self, key, payload, sender) -> None:
+        """Apply the fault a launcher's notice names where it falls on this peer."""
+        notice = self.notices.accept(key, payload)
+        if not isinstance(notice, FaultNotice) or sender != LAUNCHER or notice.fault >= len(self.faults):
             log.warning("a fault notice from %r was refused", sender)
             return
-        fault, now = faults[notice.fault], clock.now()
-        if fault.kind in NETWORK_KINDS and network == "shim" and shim is not None:
-            apply_network(fault, shim, notice.start, notice.end, lambda peer: [peer])
-        elif isinstance(fault, Clock) and fault.target == session.name:
-            for agent in agents:
-                dispatch.clocks[agent.name] = skewed(fault, notice.start)
+        fault, now, loop = self.faults[notice.fault], self.clock.now(), self.loop
+        if fault.kind in NETWORK_KINDS and self.network == "shim" and self.shim is not None:
+            apply_network(fault, self.shim, notice.start, notice.end, lambda peer: [peer])
+        elif isinstance(fault, Clock) and fault.target == self.session.name:
+            for agent in self.agents:
+                self.dispatch.clocks[agent.name] = skewed(fault, notice.start)
             if notice.end is not None:
-                loop.call_later(notice.end - now, lambda: [dispatch.clocks.pop(a.name, None) for a in agents])
+                loop.call_later(notice.end - now, lambda: [self.dispatch.clocks.pop(a.name, None) for a in self.agents])
         elif isinstance(fault, Gps):
-            for agent in agents:
+            for agent in self.agents:
                 if agent.name == fault.target and hasattr(agent, "phone"):  # a real phone's GPS is its own
                     agent.phone.lie = lie(fault)
                     if notice.end is not None:
                         loop.call_later(notice.end - now, setattr, agent.phone, "lie", None)
 
-    notices = Inbox(session.name)
-    if faults:
-        session.subscribe(keys.fault(game), lambda k, p, s: soon(on_notice, k, p, s))
-
-    orphaned: dict[str, asyncio.TimerHandle] = {}
-
-    def ground(key, alive):
+    def _ground(self, key, alive) -> None:
         """The ground station's token came or went: a player's peer waits a lease for it, then stops."""
         if alive:
-            for timer in orphaned.values():
+            for timer in self.orphaned.values():
                 timer.cancel()
-            orphaned.clear()
-        elif not orphaned and not finished.is_set():
+            self.orphaned.clear()
+        elif not self.orphaned and not self.finished.is_set():
+            assert self.lease is not None  # it is watched only with a lease
+            self.orphaned["timer"] = self.loop.call_later(self.lease, self._give_up)
 
-            def give_up():
-                why["reason"] = f"the ground station has been gone for {lease:g} s"
-                finished.set()
+    def _give_up(self) -> None:
+        self.why = f"the ground station has been gone for {self.lease:g} s"
+        self.finished.set()
 
-            orphaned["timer"] = loop.call_later(lease, give_up)
+    def _interrupted(self) -> None:
+        self.why = "interrupted"
+        self.finished.set()
 
-    if lease is not None and all(agent.role in ("walker", "phone") for agent in agents):
-        session.subscribe_liveliness(
-            keys.alive(game, "ground-station", GROUND), lambda k, alive: soon(ground, k, alive)
-        )
-
-    async def ticker(agent):
-        dispatch.start(agent)
-        due = loop.time()
+    async def _ticker(self, agent) -> None:
+        self.dispatch.start(agent)
+        due = self.loop.time()
         while True:
             due += agent.period
-            await asyncio.sleep(max(due - loop.time(), 0.0))
-            dispatch.tick(agent)
+            await asyncio.sleep(max(due - self.loop.time(), 0.0))
+            self.dispatch.tick(agent)
 
-    async def poller():
+    async def _poller(self, shim: Shim) -> None:
+        """Releases what the dead zones and the faults held, as they let it go."""
         while True:
             await asyncio.sleep(POLL)
-            now = clock.now()
-            for (receiver, key, sender), d in shim.poll(now):
-                loop.call_later(max(d.at - now, 0.0), handles[receiver], key, d.payload, sender)
+            now = self.clock.now()
+            for token, d in shim.poll(now):
+                receiver, key, sender = typing.cast(tuple[str, str, str], token)  # as _arrived gave it
+                self.loop.call_later(max(d.at - now, 0.0), self.handles[receiver], key, d.payload, sender)
 
-    def interrupted() -> None:
-        why.update(reason="interrupted")
-        finished.set()
-
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        try:
-            loop.add_signal_handler(sig, interrupted)
-        except (NotImplementedError, RuntimeError):  # not the main thread
-            pass
-
-    async def take_up():
+    async def _take_up(self, awaited, adopt, say) -> None:
         """Look for the awaited sets until they are there, then answer from them."""
         grid = awaited.game.grid_points
-        record.note(clock.now(), "sets", grid=awaited.provisional, awaited=grid)
+        self.record.note(self.clock.now(), "sets", grid=awaited.provisional, awaited=grid)
         try:
-            while (found := await loop.run_in_executor(None, cached, awaited.game, awaited.stages)) is None:
+            while (found := await self.loop.run_in_executor(None, cached, awaited.game, awaited.stages)) is None:
                 await asyncio.sleep(AWAIT_POLL)
             adopt(CtfQueries(found.solution))
         except Exception as exc:  # the game goes on, on the provisional sets
             log.warning("the %d-point sets were not taken up (%s); guidance stays on provisional sets", grid, exc)
             return
-        record.note(clock.now(), "sets", grid=grid, awaited=None)
+        self.record.note(self.clock.now(), "sets", grid=grid, awaited=None)
         if say is not None:
             say(f"guidance answers from the {grid}-point sets from now on")
 
-    async def warm():
-        began = clock.now()
+    async def _warm(self, warm_up) -> None:
+        began = self.clock.now()
         try:
-            await loop.run_in_executor(None, warm_up)
+            await self.loop.run_in_executor(None, warm_up)
         except Exception as exc:  # the game's own first queries will show what is wrong
             log.warning("the guidance could not be readied before the game (%s)", exc)
             return
-        done = clock.now()
-        record.note(done, "warmed", seconds=round(done - began, 3))
-
-    if warm_up is not None:
-        await warm()  # before the tokens: the launcher starts the game once every peer is up
-    for agent in agents:
-        session.declare_token(keys.alive(game, agent.role, agent.name))
-    tasks = [asyncio.create_task(ticker(a)) for a in agents]
-    if awaited is not None:
-        tasks.append(asyncio.create_task(take_up()))
-    if shim is not None and (shim.dead_zones is not None or faults):
-        tasks.append(asyncio.create_task(poller()))
-    try:
-        await finished.wait()
-    finally:
-        for t in tasks:
-            t.cancel()
-        await asyncio.gather(*tasks, return_exceptions=True)
-        session.close()
-        record.close()
-    if dispatch.failures:
-        counts = ", ".join(f"{name} {n}" for name, n in sorted(dispatch.failures.items()))
-        return f"{why['reason']}; agent failures: {counts}"
-    return why["reason"]
+        done = self.clock.now()
+        self.record.note(done, "warmed", seconds=round(done - began, 3))
 
 
 def _run_wide(out) -> Path | None:

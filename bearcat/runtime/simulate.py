@@ -28,7 +28,7 @@ from bearcat.bus.inprocess import InProcessBus
 from bearcat.bus.messages import Control, GameState
 from bearcat.runtime.dispatch import Dispatcher
 from bearcat.runtime.simulated_faults import SimulatedFaults
-from bearcat.runtime.world import world_of
+from bearcat.runtime.world import World, world_of
 from bearcat.scenarios.cast import Cast
 from bearcat.scenarios.faults import GROUND, LAUNCHER, FaultError, refusal
 from bearcat.scenarios.schema import Scenario
@@ -84,158 +84,169 @@ def simulate(
     the scenario's. ``faults`` is the fault plan to apply instead of the
     scenario's own."""
     world = world_of(scenario, seed=seed, netem=netem, transport=transport, plan=faults)
-    seed, profile, plan = world.seed, world.profile, world.plan
-    if (why := refusal(plan, "simulate")) is not None:
+    if (why := refusal(world.plan, "simulate")) is not None:
         raise FaultError(why)
     if players is None:
         players = world.cast(ctf_progress=ctf_progress)
-    env = simpy.Environment()
-    record = EventLog(events)
+    return Simulation(world, players, EventLog(events)).play(inspect)
 
-    def where(peer: str):
-        person = players.people.get(peer)
+
+class Simulation:
+    """One game of ``world`` played by ``players`` in virtual time, written
+    to ``record``: the in-process bus and its network shim, the agents'
+    sessions, the launcher's part and the fault plan's injector, set up in
+    that order, so that the same seed schedules the same events."""
+
+    def __init__(self, world: World, players: Cast, record: EventLog) -> None:
+        self.world, self.players, self.record = world, players, record
+        self.scenario = world.scenario
+        self.env = simpy.Environment()
+        self.shim = world.shim(record.impaired, self._where, (*(a.name for a in players.ground), LAUNCHER))
+        self.bus = InProcessBus(self._deliver)
+        self.dispatch = Dispatcher(record, lambda: self.env.now)
+        self.final: dict = {}
+        self.playing = {agent.name: agent for agent in players.agents}  # a restart puts a new agent in its place
+        self.injector: SimulatedFaults | None = None
+        self.sessions = {agent.name: self._attach(agent) for agent in players.agents}
+        for agent in players.agents:
+            self.sessions[agent.name].declare_token(keys.alive(self.scenario.name, agent.role, agent.name))
+        self.launcher = self.bus.session(LAUNCHER)
+        self.launcher_inbox = Inbox(LAUNCHER)
+        self.done = self.env.event()
+        self.launcher.subscribe(keys.state(self.scenario.name), self._on_state)
+        if world.plan:
+            self.injector = SimulatedFaults(
+                self.env,
+                self.scenario,
+                world.plan,
+                agents=self.playing,
+                ground=[a.name for a in players.ground],
+                dispatch=self.dispatch,
+                shim=self.shim,
+                record=record,
+                spawn=lambda agent: self.env.process(self._ticker(agent)),
+                rebuild=self._rebuild,
+                halt=self._halt,
+            )
+
+    def play(self, inspect=None) -> Outcome:
+        """Start every agent's clock, start the game at t = 0 and run until
+        the referee ends it or its time limit and ``GRACE`` pass; ``inspect``
+        as ``simulate`` takes it."""
+        env, scenario = self.env, self.scenario
+        for agent in self.players.agents:
+            env.process(self._ticker(agent))
+        if inspect is not None:
+            env.process(self._inspector(inspect))
+        if self.world.zones is not None or self.world.plan:
+            env.process(self._poller())
+        start = Control(t=0.0, command="start", seq=1)
+        self.record.sent(0.0, LAUNCHER, keys.control(scenario.name), start)
+        self.launcher.put(keys.control(scenario.name), encode(start))
+        env.run(until=env.any_of([self.done, env.timeout(scenario.time_limit + GRACE)]))
+        outcome = self._outcome()
+        self.record.note(env.now, "outcome", **{k: v for k, v in vars(outcome).items() if k != "counts"})
+        self.record.close()
+        for session in self.sessions.values():
+            session.close()
+        return outcome
+
+    def _where(self, peer: str):
+        """Where ``peer`` is, for the dead zones: a person's true position; None for the others."""
+        person = self.players.people.get(peer)
         return None if person is None else tuple(person.walker.position)
 
-    shim = world.shim(record.impaired, where, (*(a.name for a in players.ground), LAUNCHER))
-
-    def arrive(call, payload):
-        return lambda _event: call(payload)
-
-    def deliver(sender, receiver, key, payload, call):
+    def _deliver(self, sender, receiver, key, payload, call) -> None:
+        """Carry ``payload`` across the shim of the link, arriving when it says."""
         if payload is None:  # liveliness
             call(None)
             return
-        for d in shim.transmit(sender, receiver, key, payload, env.now, token=call):
-            env.timeout(max(d.at - env.now, 0.0)).callbacks.append(arrive(call, d.payload))
+        for d in self.shim.transmit(sender, receiver, key, payload, self.env.now, token=call):
+            self._arrive_at(d, call)
 
-    bus = InProcessBus(deliver)
-    dispatch = Dispatcher(record, lambda: env.now)
-    final: dict = {}
+    def _arrive_at(self, delivery, call) -> None:
+        self.env.timeout(max(delivery.at - self.env.now, 0.0)).callbacks.append(lambda _event: call(delivery.payload))
 
-    playing = {agent.name: agent for agent in players.agents}  # a restart puts a new agent in its place
-
-    def receiver(name):
-        def receive(key, payload, sender):
-            if injector is None:
-                dispatch.receive(playing[name], key, payload, sender)
-            else:
-                injector.arrive(name, lambda: dispatch.receive(playing[name], key, payload, sender))
-
-        return receive
-
-    def watcher(name):
-        return lambda key, alive: dispatch.peer(playing[name], key, alive)
-
-    sessions = {}
-    for agent in players.agents:
-        session = sessions[agent.name] = bus.session(agent.name)
-        dispatch.attach(agent, session)
+    def _attach(self, agent):
+        """``agent``'s session, subscribed to what it hears and watches."""
+        session = self.bus.session(agent.name)
+        self.dispatch.attach(agent, session)
+        name = agent.name
         for expr in agent.subscriptions:
-            session.subscribe(expr, receiver(agent.name))
+            session.subscribe(expr, lambda key, payload, sender: self._receive(name, key, payload, sender))
         for expr in agent.watches:
-            session.subscribe_liveliness(expr, watcher(agent.name))
-    for agent in players.agents:
-        sessions[agent.name].declare_token(keys.alive(scenario.name, agent.role, agent.name))
+            session.subscribe_liveliness(expr, lambda key, alive: self.dispatch.peer(self.playing[name], key, alive))
+        return session
 
-    launcher = bus.session(LAUNCHER)
-    launcher_inbox = Inbox(LAUNCHER)
-    done = env.event()
+    def _receive(self, name: str, key, payload, sender) -> None:
+        if self.injector is None:
+            self.dispatch.receive(self.playing[name], key, payload, sender)
+        else:
+            self.injector.arrive(name, lambda: self.dispatch.receive(self.playing[name], key, payload, sender))
 
-    def on_state(key, payload, sender):
-        state = launcher_inbox.accept(key, payload)
-        if injector is not None and state is not None:
-            injector.saw(state, env.now)
-        if isinstance(state, GameState) and state.phase == "ended" and not done.triggered:
-            final["state"] = state
-            done.succeed()
+    def _on_state(self, key, payload, sender) -> None:
+        state = self.launcher_inbox.accept(key, payload)
+        if self.injector is not None and state is not None:
+            self.injector.saw(state, self.env.now)
+        if isinstance(state, GameState) and state.phase == "ended" and not self.done.triggered:
+            self.final["state"] = state
+            self.done.succeed()
 
-    launcher.subscribe(keys.state(scenario.name), on_state)
+    def _ticker(self, agent):
+        self.dispatch.start(agent)
+        while self.playing[agent.name] is agent:
+            yield self.env.timeout(agent.period)
+            if self.playing[agent.name] is agent and (self.injector is None or self.injector.running(agent.name)):
+                self.dispatch.tick(agent)
 
-    def ticker(agent):
-        dispatch.start(agent)
-        while playing[agent.name] is agent:
-            yield env.timeout(agent.period)
-            if playing[agent.name] is agent and (injector is None or injector.running(agent.name)):
-                dispatch.tick(agent)
-
-    def poller():
+    def _poller(self):
+        """Releases what the dead zones and the faults held, as they let it go."""
         while True:
-            yield env.timeout(POLL)
-            for call, d in shim.poll(env.now):
-                env.timeout(max(d.at - env.now, 0.0)).callbacks.append(arrive(call, d.payload))
+            yield self.env.timeout(POLL)
+            for call, d in self.shim.poll(self.env.now):
+                self._arrive_at(d, call)
 
-    def inspector():
+    def _inspector(self, inspect):
         while True:
-            yield env.timeout(POLL)
-            inspect(env.now, players)
+            yield self.env.timeout(POLL)
+            inspect(self.env.now, self.players)
 
-    def halt(reason: str) -> None:
-        if not done.triggered:
-            final["halted"] = reason
-            done.succeed()
+    def _halt(self, reason: str) -> None:
+        if not self.done.triggered:
+            self.final["halted"] = reason
+            self.done.succeed()
 
-    def rebuild(peer: str, old: list) -> list:
+    def _rebuild(self, peer: str, old: list) -> list:
         """The agents of ``peer`` built afresh, as a restarted process builds them;
         a UAV's vehicle flies on through its peer's restart."""
+        world = self.world
         if peer == GROUND:
             return world.cast(people=[], ground=True).ground
-        if peer in players.uavs:
+        if peer in self.players.uavs:
             pilots = {peer: old[0].autopilot}
             return list(world.cast(people=[], uavs=[peer], ground=False, autopilots=pilots).uavs.values())
         return list(world.cast(people=[peer], ground=False).people.values())
 
-    injector = None
-    if plan:
-        injector = SimulatedFaults(
-            env,
-            scenario,
-            plan,
-            agents=playing,
-            ground=[a.name for a in players.ground],
-            dispatch=dispatch,
-            shim=shim,
-            record=record,
-            spawn=lambda agent: env.process(ticker(agent)),
-            rebuild=rebuild,
-            halt=halt,
+    def _outcome(self) -> Outcome:
+        state, limit = self.final.get("state"), self.scenario.time_limit + GRACE
+        return Outcome(
+            scenario=self.scenario.name,
+            seed=self.world.seed,
+            netem=self.world.profile.name,
+            transport=self.world.transport,
+            winner=state.winner if state else None,
+            reason=state.reason if state else self.final.get("halted", f"no result within {limit:g} s of game time"),
+            elapsed=state.elapsed if state else self.env.now,
+            ended=state is not None,
+            flag_holder=state.flag_holder if state else None,
+            captured=list(state.captured) if state else [],
+            counts=dict(sorted(self.record.counts.items())),
+            drops=self.dispatch.drops,
+            failures=dict(sorted(self.dispatch.failures.items())),
+            plugin_faults=dict(sorted(self.dispatch.plugin_faults.items())),
+            notes=_notes(self.players),
+            faults=[] if self.injector is None else self.injector.applied,
         )
-    for agent in players.agents:
-        env.process(ticker(agent))
-    if inspect is not None:
-        env.process(inspector())
-    if world.zones is not None or plan:
-        env.process(poller())
-    start = Control(t=0.0, command="start", seq=1)
-    record.sent(0.0, LAUNCHER, keys.control(scenario.name), start)
-    launcher.put(keys.control(scenario.name), encode(start))
-    env.run(until=env.any_of([done, env.timeout(scenario.time_limit + GRACE)]))
-
-    state = final.get("state")
-    outcome = Outcome(
-        scenario=scenario.name,
-        seed=seed,
-        netem=profile.name,
-        transport=world.transport,
-        winner=state.winner if state else None,
-        reason=state.reason
-        if state
-        else final.get("halted", f"no result within {scenario.time_limit + GRACE:g} s of game time"),
-        elapsed=state.elapsed if state else env.now,
-        ended=state is not None,
-        flag_holder=state.flag_holder if state else None,
-        captured=list(state.captured) if state else [],
-        counts=dict(sorted(record.counts.items())),
-        drops=dispatch.drops,
-        failures=dict(sorted(dispatch.failures.items())),
-        plugin_faults=dict(sorted(dispatch.plugin_faults.items())),
-        notes=_notes(players),
-        faults=[] if injector is None else injector.applied,
-    )
-    record.note(env.now, "outcome", **{k: v for k, v in vars(outcome).items() if k != "counts"})
-    record.close()
-    for session in sessions.values():
-        session.close()
-    return outcome
 
 
 def _notes(players) -> dict:
