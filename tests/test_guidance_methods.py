@@ -16,7 +16,7 @@ from bearcat.agents.ground_station.guidance.method import Advice, advice_problem
 from bearcat.scenarios.schema import ScenarioError, load_scenario, parse_scenario
 from bearcat.suites.checker import check_run
 from tests.support.scenario_files import scenario_text
-from tests.support.users import bearcat, install_tactics
+from tests.support.users import ROOT, bearcat, install_tactics
 
 pytestmark = pytest.mark.xdist_group("guidance-methods")
 
@@ -191,6 +191,13 @@ def test_a_method_that_fails_shows_no_advice_for_that_moment_and_the_game_goes_o
     assert outcome["ended"] and sum(outcome["plugin_faults"].values()) == len(faults)
     findings = {f.name: f for f in check_run(run)}
     assert findings["plugins"].held is True and findings["verdict"].held is True
+    # A record that lost the game's end (a full disk) cannot say whether each peer went on after its fault;
+    # an outcome that never ended says the game had no verdict.
+    lines = (run / "events.jsonl").read_text().splitlines(keepends=True)
+    (run / "events.jsonl").write_text("".join(line for line in lines if '"phase":"ended"' not in line))
+    assert {f.name: f.held for f in check_run(run)}["plugins"] is None
+    (run / "outcome.json").write_text(json.dumps(outcome | {"ended": False}))
+    assert {f.name: f.held for f in check_run(run)}["plugins"] is False
 
 
 def test_a_live_run_under_a_fault_plan_plays_the_method_and_judges_its_faults(tmp_path):
@@ -263,7 +270,7 @@ def test_the_examples_intercept_plays_a_20_game_study_against_the_builtin_guidan
 
 
 def test_the_docs_page_shows_the_examples_method_as_it_is():
-    page = (Path(__file__).resolve().parent.parent / "docs" / "your-own-agents.md").read_text()
-    shown = page.split("```python\nclass Intercept(GuidanceMethod):")[1].split("```")[0]
-    example = Path(__file__).resolve().parent.parent / "examples" / "bearcat-tactics" / "bearcat_tactics"
-    assert "class Intercept(GuidanceMethod):" + shown in (example / "intercept.py").read_text()
+    page = (ROOT / "docs" / "your-own-agents.md").read_text()
+    shown = page.split("```python\nfrom __future__ import annotations\n")[1].split("```")[0]
+    example = (ROOT / "examples" / "bearcat-tactics" / "bearcat_tactics" / "intercept.py").read_text()
+    assert example.endswith("from __future__ import annotations\n" + shown)

@@ -178,7 +178,7 @@ def test_an_entry_point_that_fails_to_load_is_named_with_its_distribution(tmp_pa
     listed = bearcat("plugins", "list", cwd=tmp_path, env={"PYTHONPATH": str(site)})
     assert listed.returncode == 1
     assert (
-        "behaviour       cannot be used: behaviour 'broken' that distribution broken-tactics registers as "
+        "behaviour        cannot be used: behaviour 'broken' that distribution broken-tactics registers as "
         "broken_tactics_gone:Broken cannot be loaded: ModuleNotFoundError: No module named 'broken_tactics_gone'"
     ) in listed.stdout
     (tmp_path / "game.toml").write_text(with_attacker(_table("broken")))

@@ -105,7 +105,9 @@ class Report(msgspec.Struct, frozen=True, forbid_unknown_fields=True):
 class Guidance(Message, tag="guidance", frozen=True):
     """What one agent's screen shows, computed from the fixes the network delivered.
 
-    ``game`` names the solver behind it; ``heading`` is the recommended
+    ``game`` names the advisor behind it (``ctf``, ``reach-avoid``,
+    ``pursuit``, ``search``, or a game of one's own's; ``none``: positions
+    only); ``heading`` is the recommended
     direction at full speed (None: no recommendation); ``region`` the
     opponent's winning region as polygons (exterior rings) and ``region_of``
     whose region it is; ``go`` the go / no-go verdict where the game has
@@ -130,7 +132,7 @@ class Guidance(Message, tag="guidance", frozen=True):
     agent: Name
     seq: Sequence
     t: Time
-    game: Literal["ctf", "reach-avoid", "pursuit", "search", "none"]
+    game: Name
     heading: Heading | None = None
     region: Lines = []
     region_of: Name | None = None

@@ -22,7 +22,8 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   answered what its protocol does not allow, or overran its budget) left
   its peer going: the peer sent on after it (a walker its truth, the
   ground station its state and UAV tasks), or the game ended within
-  ``IN_FLIGHT`` s of it; and the game ended with a verdict;
+  ``IN_FLIGHT`` s of it; and the game ended with a verdict (not judged
+  where the outcome says it ended but the record lost its end);
 - ``leftovers``: no process the run started still runs, and a kernel run
   left neither its link nor its route in the host's namespace. The run
   names its own (``runtime.processes``, ``endpoint.json``): a process is
@@ -351,6 +352,9 @@ def _plugins(run: Run) -> Finding:
     )
     first = f"{faults[0]['agent']}: plug-in {faults[0]['plugin']} {faults[0]['detail']}"
     end = _game_end(run)
+    if end is None and run.outcome is not None and run.outcome.get("ended"):
+        why = "the record lacks the game's end (lines a full disk refused, say)"
+        return Finding("plugins", None, f"{said}; {why}, so whether each peer went on cannot be judged")
     if end is None:
         return Finding("plugins", False, f"{said}, and the game ended without a verdict (first: {first})")
     last_fault: dict[str, float] = {}
