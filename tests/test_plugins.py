@@ -331,16 +331,16 @@ from bearcat.plugins import Behaviour
 
 
 class Slow(Behaviour):
-    """Runs home; raises on its 20th call and sleeps past its budget on its 30th."""
+    """Runs home; raises on its 5th call and sleeps past its budget on its 10th, early in any game."""
 
     def __init__(self, options, rng):
         self.calls = 0
 
     def decide(self, now, me, screen, situation):
         self.calls += 1
-        if self.calls == 20:
-            raise RuntimeError("twentieth")
-        if self.calls == 30:
+        if self.calls == 5:
+            raise RuntimeError("fifth")
+        if self.calls == 10:
             time.sleep(0.2)
         return situation.navigator.toward(situation.goal, me)
 '''
@@ -370,7 +370,7 @@ def test_a_live_run_plays_the_plugin_and_judges_its_faults(tmp_path):
     assert [e["fault"] for e in faults] == ["raised", "overran"]
     assert faults[1]["detail"].startswith("took ") and faults[1]["detail"].endswith("past its budget of 25 ms")
     log = (run / "peers" / "attacker.log").read_text()
-    assert "attacker: plug-in slow.py:Slow raised RuntimeError: twentieth (1 time so far)" in log
+    assert "attacker: plug-in slow.py:Slow raised RuntimeError: fifth (1 time so far)" in log
     assert "attacker: plug-in slow.py:Slow took" in log
 
 
@@ -510,6 +510,24 @@ def test_an_installed_tasking_policy_plays_by_its_short_name(tactics, tmp_path):
     assert ran.returncode == 0, ran.stderr
     game = json.loads(ran.stdout.splitlines()[0])
     assert game["plugin_faults"] == {} and game["reason"]
+
+
+def test_the_examples_escort_plays_a_20_game_study_and_a_fault_plan(tactics, tmp_path, monkeypatch, bearcat_simulate):
+    """Against the built-in defender: 20 games of the search study (a minute
+    each), then one under a plan that pauses the ground station."""
+    study = ("study", "search", "--trials", "20", "--search", "escort", "--vary", "scenario.time_limit=60.0")
+    ran = bearcat(*study, "--out", "escort", "--json", cwd=tmp_path, env={"PYTHONPATH": str(tactics)})
+    assert ran.returncode == 0, ran.stderr
+    (row,) = json.loads(ran.stdout)
+    assert row["search"] == "escort" and row["games"] == 20
+    results = [json.loads(line) for line in (tmp_path / "escort" / "results.jsonl").read_text().splitlines()]
+    assert len(results) == 20 and all("search=escort" in r["key"] and r["reason"] for r in results)
+    monkeypatch.syspath_prepend(str(tactics))
+    path = search_with(tmp_path, "bearcat_tactics.escort:Escort")
+    run = bearcat_simulate(path, [{"kind": "pause", "target": "gs", "at": 5.0, "duration": 2.0}])
+    run.assert_held()
+    assert run.findings["failsafe"].held is None  # back within the UAV's 5 s link timeout: no failsafe was due
+    assert run.findings["failsafe"].evidence == "no UAV lost its ground station for longer than its link timeout"
 
 
 def test_the_pytest_plugins_fixtures_play_the_docs_class_under_a_fault_plan(folder, bearcat_simulate):

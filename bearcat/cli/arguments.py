@@ -135,10 +135,15 @@ def change(text: str) -> tuple[str, object]:
         read: object = tomllib.loads(f"v = {value}")["v"]
     except tomllib.TOMLDecodeError:
         read = value.strip()
-    if isinstance(read, str) and read.rpartition(":")[0].endswith(".py"):
-        where, _, attribute = read.rpartition(":")
-        read = f"{Path(where).resolve()}:{attribute}"
-    return key.strip(), read
+    return key.strip(), plugin(read) if isinstance(read, str) else read
+
+
+def plugin(name: str) -> str:
+    """A plug-in's name as given; one named by a file relative to this
+    folder (``file.py:attribute``) by the file's absolute path, which a
+    worker in another folder finds too."""
+    where, _, attribute = name.rpartition(":")
+    return f"{Path(where).resolve()}:{attribute}" if where.endswith(".py") else name
 
 
 def add_struct_options(parser: argparse.ArgumentParser, struct: type, *, names=None, flags=None, types=None) -> None:

@@ -58,6 +58,14 @@ def register(commands: Commands) -> None:
         help="play only the cells of these report rates (holding, fake-out; default: every one)",
     )
     p.add_argument(
+        "--search",
+        nargs="+",
+        type=arguments.plugin,
+        metavar="POLICY",
+        help="the search study: play these UAV tasking policies, built-in or one's own (a name, module:attribute "
+        "or file.py:attribute), instead of reachability, lawnmower and nearest",
+    )
+    p.add_argument(
         "--vary",
         action="append",
         type=arguments.change,
@@ -97,6 +105,8 @@ def run(args) -> int:
     arguments.check_seeds(args.seed, args.trials)
     _check_guidance(args.study, args.guidance)
     _check_rates(args.study, args.rate)
+    if args.search and args.study != "search":
+        raise arguments.UsageError(f"--search picks the search study's tasking policies; {args.study} flies no UAV")
     report = Output(args.json)
     out = args.out or Path("studies") / args.study
     make_directory(out, "results directory")
@@ -113,7 +123,15 @@ def run(args) -> int:
         else:
             changes = dict(args.vary or ())
             tasks = study_tasks(
-                args.study, args.trials, args.seed, args.netem, args.transport, args.guidance, args.rate, changes
+                args.study,
+                args.trials,
+                args.seed,
+                args.netem,
+                args.transport,
+                args.guidance,
+                args.rate,
+                changes,
+                args.search,
             )
             why = unplayable(tasks)
             if why is not None:

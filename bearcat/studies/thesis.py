@@ -131,6 +131,11 @@ def _fake_out_cells() -> tuple[Cell, ...]:
     return tuple(cells)
 
 
+def _search_cell(policy: str) -> Cell:
+    """The search study's cell of UAV tasking ``policy`` (a plug-in name)."""
+    return Cell("search", {"uav.*.search": policy}, {"search": policy})
+
+
 STUDIES = {
     "fake-out": Study(
         _fake_out_cells(),
@@ -163,7 +168,7 @@ STUDIES = {
         "plain, worst-case and calibrated guidance (3.5.2)",
     ),
     "search": Study(
-        tuple(Cell("search", {"uav.*.search": s}, {"search": s}) for s in ("reachability", "lawnmower", "nearest")),
+        tuple(_search_cell(s) for s in ("reachability", "lawnmower", "nearest")),
         (None,),
         ("search",),
         "reachability-guided UAV search against a lawnmower sweep and the nearest unobserved point: time until "
@@ -172,12 +177,13 @@ STUDIES = {
 }
 
 
-def study_cells(study: str, guidance=None) -> tuple[Cell, ...]:
+def study_cells(study: str, guidance=None, search=None) -> tuple[Cell, ...]:
     """The cells of ``study``; with ``guidance`` (names of ``GUIDANCE`` or
     ``ABLATED``), only those of that guidance (so the fake-out map's aided
     rows can be played without its unaided ones); without, all but the
-    ablations."""
-    cells = STUDIES[study].cells
+    ablations. ``search`` (tasking policies, built-in or one's own) gives
+    the search study those cells instead of the thesis's three."""
+    cells = tuple(_search_cell(p) for p in dict.fromkeys(search)) if search else STUDIES[study].cells
     if guidance is None:
         return tuple(c for c in cells if c.labels.get("guidance") not in ABLATED)
     return tuple(c for c in cells if c.labels.get("guidance") in guidance)
@@ -194,17 +200,26 @@ def study_rates(study: str) -> list[float]:
 
 
 def study_tasks(
-    study: str, trials: int, seed: int, profiles=None, transports=None, guidance=None, rates=None, changes=None
+    study: str,
+    trials: int,
+    seed: int,
+    profiles=None,
+    transports=None,
+    guidance=None,
+    rates=None,
+    changes=None,
+    search=None,
 ) -> list[dict]:
     """The games of ``study``: per cell (of ``guidance`` and ``rates``, if
-    given), profile, transport (None: the scenario's), ``trials`` seeds.
+    given; of the tasking policies ``search``, in the search study),
+    profile, transport (None: the scenario's), ``trials`` seeds.
     ``changes`` (variant keys to values, ``scenarios.variants``) are made
     in every cell's scenario on top of its own, such as another behaviour
     for one side; they are part of each game's key, so a results file
     keeps the games with and without them apart."""
     spec = STUDIES[study]
     tasks = []
-    for cell in study_cells(study, guidance):
+    for cell in study_cells(study, guidance, search):
         if rates is not None and cell.labels.get("rate") not in rates:
             continue
         if changes:

@@ -16,7 +16,8 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   a pause, outage or partition that outlasted the lease seen within the
   lease and ``SLACK`` s, and the peer back within ``REJOIN`` s of its end;
   a player cut off gets guidance again within ``REJOIN`` s of the heal;
-- ``failsafe``: a UAV whose ground station vanished applied its failsafe
+- ``failsafe``: a UAV whose ground station vanished for longer than its
+  link timeout applied its failsafe
   within its ``link_timeout`` after it vanished;
 - ``plugins``: every fault of a plug-in (``agents.guard``: it raised,
   answered what its protocol does not allow, or overran its budget) left
@@ -323,7 +324,8 @@ def _failsafe(run: Run) -> Finding:
         return Finding("failsafe", None, "no UAV in this run")
     findings = []
     for uav in run.scenario.uavs:
-        lost = _first_ground_loss(run, uav.id)
+        # A loss shorter than the link timeout is over before a failsafe is due.
+        lost = next((t for t, back in _ground_losses(run, uav.id) if back - t >= uav.link_timeout), None)
         if lost is None:
             continue
         acted = next(  # a failsafe applied before the loss (a slow start, an earlier gap) answers another
@@ -338,7 +340,7 @@ def _failsafe(run: Run) -> Finding:
             return Finding("failsafe", False, f"UAV {uav.id} lost its ground station at {lost:.1f} s and did nothing")
         findings.append(f"{uav.id}: {acted['what']} after {acted['at'] - lost:.1f} s")
     if not findings:
-        return Finding("failsafe", None, "no UAV lost its ground station")
+        return Finding("failsafe", None, "no UAV lost its ground station for longer than its link timeout")
     return Finding("failsafe", True, "; ".join(findings))
 
 
@@ -504,13 +506,12 @@ def _game_end(run: Run) -> float | None:
     return min(ended) if ended else None
 
 
-def _first_ground_loss(run: Run, uav: str) -> float | None:
+def _ground_losses(run: Run, uav: str):
+    """When ``uav`` lost its ground station, and when it had it back (inf: never): each fault that cut them apart."""
     for fault in run.faults:
-        if GROUND in fault.get("peers", []) and fault["kind"] in ("kill", "stop", "restart", "pause", "partition"):
-            return fault["t"]
-        if uav in fault.get("peers", []) and fault["kind"] in ("partition", "outage"):
-            return fault["t"]
-    return None
+        cut = GROUND in fault.get("peers", []) and fault["kind"] in ("kill", "stop", "restart", "pause", "partition")
+        if cut or (uav in fault.get("peers", []) and fault["kind"] in ("partition", "outage")):
+            yield fault["t"], run.ended.get(fault["fault"], math.inf)
 
 
 def _truth(run: Run, until: float) -> dict[str, list[tuple[float, np.ndarray]]]:
