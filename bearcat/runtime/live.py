@@ -73,41 +73,25 @@ the launcher, on the ground station's side of every cut, logs every
 guidance in full, so the ground station's log only says it sent each."""
 
 
-async def run_peer(
-    agents,
-    session,
-    game: str,
-    *,
-    shim: Shim | None = None,
-    record: EventLog | None = None,
-    faults: tuple = (),
-    network: str = "shim",
-    lease: float | None = None,
-    awaited=None,
-    adopt=None,
-    say=None,
-    warm_up=None,
-) -> str:
+async def run_peer(agents, session, game: str, *, awaited=None, adopt=None, say=None, warm_up=None, **setting) -> str:
     """Drive ``agents`` on ``session`` until the game ends; why it stopped,
     and how often each agent failed if any did. The session is closed on the
     way out, while the loop still stands, so no late sample is handed to it.
-    ``faults`` is the run's fault plan, ``network`` where it runs; with a
-    ``lease``, the peer stops when the ground station has been gone that long.
-    ``awaited`` (``cast.AwaitedSets``) are the sets to hand to ``adopt``
-    once they are in the cache, which ``say`` is told of; ``warm_up()``
-    (``Cast.warm_up``) is run off the event loop before the peer says it is
-    up, so that the game starts with the guidance ready."""
-    peer = PeerRun(agents, session, game, shim=shim, record=record, faults=faults, network=network, lease=lease)
-    return await peer.run(awaited=awaited, adopt=adopt, say=say, warm_up=warm_up)
+    ``setting`` is the peer's (``PeerRun``: its shim, record, fault plan,
+    network and lease). ``awaited`` (``cast.AwaitedSets``) are the sets to
+    hand to ``adopt`` once they are in the cache, which ``say`` is told of;
+    ``warm_up()`` (``Cast.warm_up``) is run off the event loop before the
+    peer says it is up, so that the game starts with the guidance ready."""
+    return await PeerRun(agents, session, game, **setting).run(awaited=awaited, adopt=adopt, say=say, warm_up=warm_up)
 
 
 class PeerRun:
     """One peer's agents on its ``session``, on the wall clock and the
-    running event loop: what it hears goes through the ``shim`` (if the
-    peer emulates its network) to the agents' handlers, fault notices of
-    the plan ``faults`` are applied where they fall on this peer, and a
-    player's peer watches the ground station for ``lease`` seconds (see
-    ``run_peer``)."""
+    running event loop, writing to ``record``: what it hears goes through
+    the ``shim`` (if the peer emulates its network) to the agents'
+    handlers, fault notices of the plan ``faults`` are applied where they
+    fall on this peer (``network``: where it runs), and a player's peer
+    stops when the ground station has been gone for ``lease`` seconds."""
 
     def __init__(
         self,
