@@ -72,6 +72,7 @@ def test_a_live_game_finishes_records_and_leaves_no_process(tmp_path):
         "reliable": True,
         "verdict": True,
         "detection": None,
+        "supervision": None,
         "failsafe": None,
         "plugins": True,
         "leftovers": True,

@@ -361,6 +361,7 @@ def test_a_live_run_plays_the_plugin_and_judges_its_faults(tmp_path):
         "reliable": True,
         "verdict": True,
         "detection": None,
+        "supervision": None,
         "failsafe": None,
         "plugins": True,
         "leftovers": True,

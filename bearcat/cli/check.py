@@ -33,7 +33,8 @@ def run_check(args) -> int:
 
     findings = check_run(args.run_dir)
     out = Output(args.json)
+    width = max(len(f.name) for f in findings)
     for f in findings:
-        out.say(f"{MARKS[f.held]:>6}  {f.name:<10} {f.evidence}")
+        out.say(f"{MARKS[f.held]:>6}  {f.name:<{width}} {f.evidence}")
     out.json([asdict(f) for f in findings])
     return 1 if any(f.held is False for f in findings) else 0

@@ -50,6 +50,7 @@ from bearcat.runtime.live_faults import LiveFaults
 from bearcat.runtime.peer_commands import BEARCAT, VEHICLE, free_port, started_by_hand, vehicle_command
 from bearcat.runtime.peer_spec import PeerSpec, flags, write_spec
 from bearcat.runtime.peers import LocalPeers
+from bearcat.runtime.supervisor import Supervisor
 from bearcat.scenarios.faults import GROUND, LAUNCHER
 from bearcat.scenarios.schema import Scenario
 
@@ -132,6 +133,9 @@ class LiveRun:
         self.how: dict[str, tuple] = {}  # peer -> (role, flags): how to start it again
         self.injector: LiveFaults | None = None
         self.started_at: float | None = None
+        self.supervisor = Supervisor(scenario.supervision)
+        self._mourned: set[str] = set()  # peers whose death is recorded and who have not started again
+        self._due: dict[str, float] = {}  # peer -> when (monotonic) it starts again
         self._inbox = Inbox(LAUNCHER)
         self._budget = SenderBudget()
         self._final: dict = {}
@@ -255,7 +259,8 @@ class LiveRun:
         # The ground station and the phones' bridges stay on the laptop: a real phone's network is real.
         colocated = role in ("ground-station", "phone")
         log_path = s.out / "peers" / f"{name}.log"
-        peer = self.places.start(name, command, log_path, colocated=colocated, again=again)
+        beside = self.children.get(f"vehicle-{name}") if role == "uav" else None
+        peer = self.places.start(name, command, log_path, colocated=colocated, again=again, beside=beside)
         processes.record(s.out, name, peer.pid)
         return peer
 
@@ -357,9 +362,11 @@ class LiveRun:
         s.say(f"{self.game}: {len(self.expected)} peers up; game started")
 
     def supervise(self) -> str | None:
-        """Wait for the end of the game; why the launcher had to end it, if it
-        did (a dead walker's forfeit is the referee's to call, once its lease
-        to rejoin has run out; a peer a fault restarts is not dead)."""
+        """Wait for the end of the game, starting again each peer that dies
+        when no fault plan asked for it, as its role's policy says; why the
+        launcher had to end the game, if it did (a dead walker's forfeit is
+        the referee's to call, once its lease to rejoin has run out; a peer a
+        fault restarts is not dead)."""
         s = self.settings
         assert self.started_at is not None, "supervise() follows begin()"
         limit = s.scenario.time_limit + GRACE
@@ -371,7 +378,14 @@ class LiveRun:
             if self.injector is not None:
                 self.injector.respawn()
             downed = {} if self.injector is None else dict(self.injector.out_of_play)
-            dead = [n for n, p in self.children.items() if p.poll() is not None and not downed.get(n, ("", False))[1]]
+            given_up = self._mourn(downed)
+            if given_up is not None:
+                return given_up
+            dead = [
+                n
+                for n, p in self.children.items()
+                if p.poll() is not None and n not in self._due and not downed.get(n, ("", False))[1]
+            ]
             if dead:
                 if GROUND in dead:
                     if GROUND in downed:
@@ -383,6 +397,36 @@ class LiveRun:
             if time.monotonic() - self.started_at > limit:
                 return f"no result within {limit:g} s"
             time.sleep(0.05)
+
+    def _mourn(self, downed: dict[str, tuple[str, bool]]) -> str | None:
+        """Record each death no fault caused, and start the peer again when
+        its backoff is over, if its policy says so; why the run gives up on
+        a peer that died too often, if it does."""
+        now = time.monotonic()
+        for name, process in self.children.items():
+            if process.poll() is None or name in downed or name in self._mourned:
+                continue
+            self._mourned.add(name)
+            death = self.supervisor.died(name, self.how.get(name, (None,))[0], process.returncode, now)
+            with self._lock:
+                self.record.note(time.time(), "died", **vars(death))
+            if death.gives_up:
+                return death.why
+            if death.restart:
+                self._due[name] = now + death.wait
+                _say_in_log(
+                    self.settings.out / "peers" / f"{name}.log",
+                    f"peer {name}: died with code {death.code}, which no fault plan asked for; "
+                    f"started again in {death.wait:g} s ({death.why})",
+                )
+        for name, due in list(self._due.items()):
+            if now >= due:
+                del self._due[name]
+                self._mourned.discard(name)
+                self.children[name] = self.start_peer(name, again=True)
+                with self._lock:
+                    self.record.note(time.time(), "restarted", peer=name, pid=self.children[name].pid)
+        return None
 
     def stop(self, reason: str | None) -> LiveOutcome:
         """Stop every peer the launcher started; the outcome, recorded and written."""
@@ -500,6 +544,12 @@ def _keep(out: Path, outcome: LiveOutcome, record: EventLog, say) -> None:
         say(f"cannot write {out / 'outcome.json'} ({exc.strerror or exc}); the outcome:\n{text}")
     if record.lost:
         say(f"{out / 'events.jsonl'}: the disk refused {record.lost} line(s) ({record.failure})")
+
+
+def _say_in_log(path: Path, line: str) -> None:
+    """Append ``line`` to a peer's log, which the peer cannot write itself (it is dead)."""
+    with open(path, "a", encoding="utf-8") as log_file:
+        log_file.write(line + "\n")
 
 
 def agent_failures(peers: Path) -> dict[str, int]:

@@ -51,11 +51,20 @@ class LocalPeers:
         return ("127.0.0.1",)
 
     def start(
-        self, name: str, command: Callable[[str], list[str]], log: Path, *, colocated: bool = False, again: bool = False
+        self,
+        name: str,
+        command: Callable[[str], list[str]],
+        log: Path,
+        *,
+        colocated: bool = False,
+        again: bool = False,
+        beside: subprocess.Popen | None = None,
     ) -> subprocess.Popen:
         """Start peer ``name`` running ``command(endpoint)``, its output in ``log``
         (after what it wrote before, when it starts ``again``); a ``colocated``
-        peer shares the router's machine (the ground station)."""
+        peer shares the router's machine (the ground station); a peer
+        ``beside`` a running process shares its network (a UAV's peer started
+        again, beside the vehicle it flies over that network's loopback)."""
         return _child(command(self.loopback), log, again)
 
     def start_vehicle(self, flyer: subprocess.Popen, command: list[str], log: Path) -> subprocess.Popen:
@@ -112,10 +121,12 @@ class KernelPeers(LocalPeers):
     def hosts(self) -> tuple[str, ...]:
         return (*super().hosts, self.network.router)
 
-    def start(self, name, command, log, *, colocated=False, again=False) -> subprocess.Popen:
+    def start(self, name, command, log, *, colocated=False, again=False, beside=None) -> subprocess.Popen:
         if colocated:
             return super().start(name, command, log, again=again)
         with open(log, "a" if again else "w") as output:
+            if beside is not None and beside.poll() is None:
+                return self.network.enter(beside, command(self.outside), log_file=output)
             return self.network.spawn(name, command(self.outside), log_file=output)
 
     def start_vehicle(self, flyer, command, log) -> subprocess.Popen:

@@ -78,6 +78,7 @@ from bearcat.maps.model import check_polygonal
 from bearcat.netem.profiles import load_profiles
 from bearcat.scenarios.faults import Fault, check_faults
 from bearcat.scenarios.game import GAMES, Game
+from bearcat.scenarios.supervision import Supervision
 from bearcat.solvers.levelset.devices import DEVICES
 from bearcat.validation import Invalid, convert, not_one_of
 
@@ -267,6 +268,7 @@ class ScenarioFile(_Table, frozen=True):
     guidance: GuidanceTable = GuidanceTable()
     uav: tuple[UavSpec, ...] = ()
     fault: tuple[Fault, ...] = ()
+    supervision: Supervision = Supervision()
 
 
 @dataclass(frozen=True)
@@ -297,6 +299,7 @@ class Scenario:
     tasking: dict[str, Plugged] = field(default_factory=dict)  # UAV -> its tasking policy, options read
     guidance: dict[str, Plugged] = field(default_factory=dict)  # agent -> its guidance method, options read
     guidance_budget: float | None = None  # s a method may take in live runs; None: a quarter of the period
+    supervision: Supervision = field(default_factory=Supervision)  # which peers a live run starts again, how soon
     directory: Path | None = None  # the folder of the scenario's file, which file.py:attribute plug-ins are in
 
     def behaviour_of(self, agent: str) -> Plugged:
@@ -422,6 +425,7 @@ def parse_scenario(
         tasking=tasking,
         guidance=guidance,
         guidance_budget=file.guidance.budget,
+        supervision=file.supervision,
         directory=directory,
     )
 

@@ -19,6 +19,11 @@ broken, or does not apply to the run (``None``), with one line of evidence:
 - ``failsafe``: a UAV whose ground station vanished for longer than its
   link timeout applied its failsafe
   within its ``link_timeout`` after it vanished;
+- ``supervision``: each peer that died when no fault plan asked for it
+  was started again within its backoff and ``RESTART_SLACK`` s, as the
+  scenario's ``[supervision]`` says, and was back on the bus within
+  ``REJOIN`` s, or the run gave it up and says why; and the game still
+  ended with a verdict (``verdict`` judges it against the truth);
 - ``plugins``: every fault of a plug-in (``agents.guard``: it raised,
   answered what its protocol does not allow, or overran its budget) left
   its peer going: the peer sent on after it (a walker its truth, the
@@ -62,7 +67,8 @@ RELIABLE_KINDS = ("state", "control", "task")
 IN_FLIGHT = 2.0  # s before its receiver's last record a message must have arrived by
 WINDOW = 1.0  # s of truth before the verdict in which a capture must show
 ENDINGS = ("peer ", "vehicle ")
-INVARIANTS = ("logs", "reliable", "verdict", "detection", "failsafe", "plugins", "leftovers")
+RESTART_SLACK = 2.0  # s from a restart's due time to its process being started
+INVARIANTS = ("logs", "reliable", "verdict", "detection", "supervision", "failsafe", "plugins", "leftovers")
 DETECTABLE = ("kill", "stop", "restart", "pause", "partition", "outage")
 
 
@@ -83,6 +89,7 @@ def check_run(directory: str | Path | Run) -> list[Finding]:
         _reliable(run),
         _verdict(run),
         _detection(run),
+        _supervision(run),
         _failsafe(run),
         _plugins(run),
         _leftovers(run),
@@ -113,6 +120,8 @@ class Run:
         self.faults = [e for e in self.events if e["event"] == "fault"]
         self.ended = {e["fault"]: e["t"] for e in self.events if e["event"] == "fault-end"}
         self.seen = [e for e in self.events if e["event"] in ("gone", "alive")]
+        self.deaths = [e for e in self.events if e["event"] == "died"]
+        self.restarts = [e for e in self.events if e["event"] == "restarted"]
         self._records = [e for log in self.peer_logs.values() for e in log] if self.peer_logs else self.events
 
     def records(self) -> list[dict]:
@@ -144,7 +153,7 @@ class Run:
             return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "guidance")
         if what == "sent":
             return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "truth")
-        return what in ("did", "plugin", "fault", "fault-end", "gone", "alive")
+        return what in ("did", "plugin", "fault", "fault-end", "gone", "alive", "died", "restarted")
 
     def _outcome(self) -> dict | None:
         try:
@@ -223,7 +232,7 @@ def _verdict(run: Run) -> Finding:
     ended = [e for e in run.events if e["event"] == "sent" and _kind(e["key"]) == "state"]
     final = next((e["message"] for e in reversed(ended) if e["message"]["phase"] == "ended"), None)
     if final is None:
-        if "fault[" in reason:
+        if "fault[" in reason or any(e["gives_up"] and e["why"] == reason for e in run.deaths):
             return Finding("verdict", True, f"the run ended without a verdict, and says why: {reason}")
         return Finding("verdict", None, f"the game never ended ({reason})")
     if final.get("judged_on") != "truth":
@@ -237,6 +246,9 @@ def _verdict(run: Run) -> Finding:
     if " is gone" in reason:
         gone = reason.split(" is gone")[0].split()[-1]
         fault = next((f for f in run.faults if gone in f.get("peers", [])), None)
+        death = next((e for e in run.deaths if e["peer"] == gone and not e["restart"]), None)
+        if fault is None and death is not None:
+            return Finding("verdict", True, f"{reason}: it died with code {death['code']} and {death['why']}")
         if fault is None:
             return Finding("verdict", False, f"{reason}, but no fault hit {gone}")
         return Finding("verdict", True, f"{reason}: ended by fault[{fault['fault']}] ({fault['describe']})")
@@ -317,6 +329,45 @@ def _detection(run: Run) -> Finding:
     if broken:
         return Finding("detection", False, "; ".join(broken))
     return Finding("detection", True, "; ".join(said) or "no fault needed detecting")
+
+
+def _supervision(run: Run) -> Finding:
+    if not run.deaths:
+        return Finding("supervision", None, "no peer died when no fault plan asked for it")
+    said, broken = [], []
+    for death in run.deaths:
+        peer, t = death["peer"], death["t"]
+        if death["gives_up"]:
+            if run.outcome is None or run.outcome.get("reason") != death["why"]:
+                broken.append(f"the run gave {peer} up at {t:.1f} s but its outcome does not say so")
+            else:
+                said.append(f"{peer} given up at {t:.1f} s: {death['why']}")
+            continue
+        if not death["restart"]:
+            said.append(f"{peer} died at {t:.1f} s with code {death['code']}, not restarted: {death['why']}")
+            continue
+        restarted = next((e["t"] for e in run.restarts if e["peer"] == peer and e["t"] >= t), None)
+        game_over = _game_end(run)
+        due = t + death["wait"]
+        if restarted is None:
+            if game_over is None or game_over > due + RESTART_SLACK:
+                broken.append(f"{peer} died at {t:.1f} s and was not started again within {death['wait']:g} s")
+            continue
+        if restarted - due > RESTART_SLACK:
+            broken.append(f"{peer} started again {restarted - t:.1f} s after its death, past its backoff")
+            continue
+        back = _first(run, peer, "alive", restarted)
+        if back is None and (game_over is None or game_over > restarted + REJOIN):
+            broken.append(f"{peer} started again at {restarted:.1f} s but not back within {REJOIN:g} s")
+            continue
+        when = "the game ended first" if back is None else f"back {back - restarted:.1f} s later"
+        said.append(f"{peer} died (code {death['code']}), started again {restarted - t:.1f} s later, {when}")
+    if run.outcome is None or (not run.outcome.get("ended") and not any(d["gives_up"] for d in run.deaths)):
+        reason = "no outcome" if run.outcome is None else run.outcome.get("reason")
+        broken.append(f"the game ended without a verdict ({reason})")
+    if broken:
+        return Finding("supervision", False, "; ".join(broken))
+    return Finding("supervision", True, "; ".join(said))
 
 
 def _failsafe(run: Run) -> Finding:
@@ -468,7 +519,14 @@ def _cut_off(run: Run, t: float, *peers: str) -> bool:
         hit = names & set(fault.get("peers", [])) or fault["kind"] == "partition"
         if hit and start - 0.5 <= t <= end + lease:
             return True
-    return False
+    return any(death["peer"] in names and start - 0.5 <= t <= end + lease for death, start, end in _absences(run))
+
+
+def _absences(run: Run):
+    """Each death no fault caused, with when it happened and when its peer started again (inf: never)."""
+    for death in run.deaths:
+        back = next((e["t"] for e in run.restarts if e["peer"] == death["peer"] and e["t"] >= death["t"]), math.inf)
+        yield death, death["t"], back
 
 
 def _lasted(run: Run, fault: dict) -> float | None:
@@ -512,6 +570,9 @@ def _ground_losses(run: Run, uav: str):
         cut = GROUND in fault.get("peers", []) and fault["kind"] in ("kill", "stop", "restart", "pause", "partition")
         if cut or (uav in fault.get("peers", []) and fault["kind"] in ("partition", "outage")):
             yield fault["t"], run.ended.get(fault["fault"], math.inf)
+    for death, start, end in _absences(run):
+        if death["peer"] == GROUND:
+            yield start, end
 
 
 def _truth(run: Run, until: float) -> dict[str, list[tuple[float, np.ndarray]]]:

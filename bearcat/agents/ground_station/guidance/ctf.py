@@ -27,11 +27,11 @@ Its advisor answers in three forms, one for each built-in guidance method
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import norm, qmc
 
 from bearcat.agents.ground_station.calibration import Calibration
 from bearcat.agents.ground_station.guidance.fixes import LatestFixes, Uncertainty, nearest_inside
@@ -67,16 +67,17 @@ class Estimate:
     age: float
 
 
-def _draws() -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
+@functools.cache
+def draws() -> tuple[tuple[np.ndarray, np.ndarray], tuple[np.ndarray, np.ndarray]]:
     """Fixed quasi-random draws, for each player a mode uniform and two
     standard normals: an unscrambled Sobol' sequence, shifted half a
-    step off zero, the same for every answer (common random numbers)."""
+    step off zero, the same for every answer (common random numbers).
+    Drawn at the first answer: scipy.stats costs every peer a second to import."""
+    from scipy.stats import norm, qmc
+
     points = qmc.Sobol(6, scramble=False).random_base2(SAMPLES_LOG2)
     points = (points + 0.5 / len(points)) % 1.0
     return (norm.ppf(points[:, 1:3]), points[:, 0]), (norm.ppf(points[:, 4:6]), points[:, 3])
-
-
-DRAWS = _draws()
 
 
 class CtfAdvisor:
@@ -242,11 +243,11 @@ class CtfAdvisor:
         }
 
     def _samples(self, estimate: Estimate) -> tuple[np.ndarray, np.ndarray]:
-        """The joint samples of ``estimate``'s beliefs (``DRAWS`` through
+        """The joint samples of ``estimate``'s beliefs (``draws()`` through
         each), drawn once for both players' answers at one moment."""
         held = self._drawn
         if held is None or held[0] is not estimate.attacker or held[1] is not estimate.defender:
-            (za, ua), (zd, ud) = DRAWS
+            (za, ua), (zd, ud) = draws()
             samples = (estimate.attacker.draw(za, ua), estimate.defender.draw(zd, ud))
             held = self._drawn = (estimate.attacker, estimate.defender, samples)
         return held[2]
