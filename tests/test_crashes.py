@@ -17,10 +17,11 @@ import time
 
 import pytest
 
+from bearcat.agents.ground_station.event_log import read_events
 from bearcat.runtime import processes
 from bearcat.scenarios.schema import load_scenario
 from bearcat.suites.checker import check_run
-from tests.support.live_runs import start_launcher
+from tests.support.live_runs import start_launcher, wait_for
 from tests.support.scenario_files import write_scenario
 from tests.support.system import missing_kernel_network
 
@@ -131,3 +132,32 @@ def test_a_uav_peer_killed_at_a_random_moment_is_restarted_and_the_search_ends_w
     finally:
         if launcher.poll() is None:
             launcher.kill()
+
+
+def test_a_ground_station_that_dies_past_its_intensity_ends_the_game_saying_so(tmp_path):
+    path = write_scenario(tmp_path, time_limit=60.0)
+    path.write_text(path.read_text() + "\n[supervision]\nmax_restarts = 1\nperiod = 600.0\n")
+    out = tmp_path / "run"
+    launcher = start_launcher(path, out)
+    try:
+        kill_mid_game(launcher, out, "gs", 1.0)
+        assert wait_for(lambda: restarts(out) == 1, 60.0), "the ground station was not started again"
+        (again,) = [p for p in processes.recorded(out) or [] if p.name == "gs" and processes.running(p)]
+        os.kill(again.pid, signal.SIGKILL)
+        output, _ = launcher.communicate(timeout=120)
+    finally:
+        if launcher.poll() is None:
+            launcher.kill()
+    outcome = json.loads((out / "outcome.json").read_text())
+    why = "peer gs restarted too often: 2 unplanned deaths within 600 s (max_restarts 1), the last with code -9"
+    assert not outcome["ended"] and outcome["winner"] is None and outcome["reason"] == why, output
+    assert why in output
+    findings = judged(out)
+    assert findings["supervision"] and findings["verdict"] and findings["logs"] and findings["leftovers"], findings[
+        "evidence"
+    ]
+
+
+def restarts(out) -> int:
+    events = out / "events.jsonl"
+    return sum(e["event"] == "restarted" for e in read_events(events)) if events.exists() else 0

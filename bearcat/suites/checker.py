@@ -335,32 +335,35 @@ def _supervision(run: Run) -> Finding:
     if not run.deaths:
         return Finding("supervision", None, "no peer died when no fault plan asked for it")
     said, broken = [], []
-    for death in run.deaths:
+    for k, death in enumerate(run.deaths):
         peer, t = death["peer"], death["t"]
         if death["gives_up"]:
             if run.outcome is None or run.outcome.get("reason") != death["why"]:
-                broken.append(f"the run gave {peer} up at {t:.1f} s but its outcome does not say so")
+                broken.append(f"the run gave {peer} up but its outcome does not say so")
             else:
-                said.append(f"{peer} given up at {t:.1f} s: {death['why']}")
+                said.append(f"{peer} given up: {death['why']}")
             continue
         if not death["restart"]:
-            said.append(f"{peer} died at {t:.1f} s with code {death['code']}, not restarted: {death['why']}")
+            said.append(f"{peer} died with code {death['code']}, not restarted: {death['why']}")
             continue
+        # Its next life is judged until it dies again or the run ends.
+        again = min((e["t"] for e in run.deaths[k + 1 :] if e["peer"] == peer), default=math.inf)
+        then = min(again, _run_end(run))
         restarted = next((e["t"] for e in run.restarts if e["peer"] == peer and e["t"] >= t), None)
-        game_over = _game_end(run)
         due = t + death["wait"]
         if restarted is None:
-            if game_over is None or game_over > due + RESTART_SLACK:
-                broken.append(f"{peer} died at {t:.1f} s and was not started again within {death['wait']:g} s")
+            if then > due + RESTART_SLACK:
+                broken.append(f"{peer} died and was not started again within {death['wait']:g} s")
             continue
         if restarted - due > RESTART_SLACK:
             broken.append(f"{peer} started again {restarted - t:.1f} s after its death, past its backoff")
             continue
         back = _first(run, peer, "alive", restarted)
-        if back is None and (game_over is None or game_over > restarted + REJOIN):
-            broken.append(f"{peer} started again at {restarted:.1f} s but not back within {REJOIN:g} s")
+        if (back is None or back > then) and then > restarted + REJOIN:
+            broken.append(f"{peer}, started again {restarted - t:.1f} s after its death, not back within {REJOIN:g} s")
             continue
-        when = "the game ended first" if back is None else f"back {back - restarted:.1f} s later"
+        first = "it died again" if again <= then else "the run ended"
+        when = f"and {first} before it was back" if back is None or back > then else f"back {back - restarted:.1f} s on"
         said.append(f"{peer} died (code {death['code']}), started again {restarted - t:.1f} s later, {when}")
     if run.outcome is None or (not run.outcome.get("ended") and not any(d["gives_up"] for d in run.deaths)):
         reason = "no outcome" if run.outcome is None else run.outcome.get("reason")
@@ -562,6 +565,12 @@ def _game_end(run: Run) -> float | None:
         if e["event"] == "sent" and _kind(e["key"]) == "state" and e["message"]["phase"] == "ended"
     ]
     return min(ended) if ended else None
+
+
+def _run_end(run: Run) -> float:
+    """When the game ended, or failing that the launcher's last record."""
+    end = _game_end(run)
+    return end if end is not None else max((e["t"] for e in run.events), default=math.inf)
 
 
 def _ground_losses(run: Run, uav: str):
