@@ -25,7 +25,14 @@ def register(commands: Commands) -> None:
         "for all of them (and for those started by hand, here or on other machines), start the game, and stop "
         "every peer it started when it ends (or on Ctrl-C, or when a peer dies).",
     )
-    run.add_argument("scenario", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
+    run.add_argument("scenario", nargs="?", metavar="SCENARIO", help="a built-in scenario name or a scenario TOML file")
+    run.add_argument(
+        "--resume",
+        type=Path,
+        metavar="RUN",
+        help="take up again the run in RUN, whose launcher died: the same settings, router port and certificates; "
+        "the ground station resumes from its log, the walkers where they stood, and the logs carry on",
+    )
     run.add_argument(
         "--out",
         type=Path,
@@ -169,6 +176,10 @@ def run_live(args) -> int:
     from bearcat.runtime.launch import launch, preflight
     from bearcat.scenarios.cast import awaited_sets, unsolved
 
+    if args.resume is not None:
+        return _resume(args)
+    if args.scenario is None:
+        raise arguments.UsageError("bearcat run needs a SCENARIO, or --resume RUN to take up a run whose launcher died")
     if args.network == "kernel":
         from bearcat.netem.kernel.commands import KernelError
         from bearcat.netem.kernel.network import missing
@@ -239,6 +250,48 @@ def run_live(args) -> int:
             compiling.join()
     if args.viewer:
         _open_viewer(out / "recording.rrd")
+    return 0 if outcome.ended else 1
+
+
+def _resume(args) -> int:
+    """``bearcat run --resume RUN``: the run's own settings, which no flag may change."""
+    from bearcat.bus.endpoints import parse_endpoint
+    from bearcat.runtime.launch import launch
+    from bearcat.runtime.resume import takes_up
+    from bearcat.runtime.run_directory import SCENARIO
+
+    given = [f"--{name}" for name in ("seed", "netem", "transport", "faults", "certs", "out") if getattr(args, name)]
+    given += [f"--{name}" for name in ("secure", "phone", "joins", "listen") if getattr(args, name)]
+    if args.scenario is not None or given:
+        what = "a SCENARIO" if args.scenario is not None else given[0]
+        raise arguments.UsageError(f"--resume RUN takes the run's own settings: {what} cannot be given with it")
+    out = args.resume
+    launched = takes_up(out)
+    scenario = load_scenario(out / SCENARIO)
+    presolve(scenario, launched.netem, provisional=launched.provisional)
+    with writing(out, "run directory"):
+        outcome = launch(
+            scenario,
+            launched.scenario_ref,
+            out,
+            seed=launched.seed,
+            netem=launched.netem,
+            transport=launched.transport,
+            network=launched.network,
+            say=lambda text: print(text, flush=True),
+            faults=(),
+            certs=None if launched.certs is None else Path(launched.certs),
+            secure=launched.secure,
+            phones=launched.phones,
+            joins=launched.joins,
+            page=launched.page,
+            provisional=launched.provisional,
+            listen=tuple(parse_endpoint(e) for e in launched.listen),
+            taken_up=launched,
+        )
+    who = f"{outcome.winner} wins" if outcome.winner else "no winner"
+    print(f"{scenario.name}: {who} at {outcome.elapsed:.1f} s: {outcome.reason}", flush=True)
+    print(f"run directory: {out}; replay: bearcat view {out}", flush=True)
     return 0 if outcome.ended else 1
 
 

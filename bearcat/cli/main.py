@@ -65,6 +65,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
     from bearcat.maps.errors import MapError
     from bearcat.netem.kernel.commands import KernelError
     from bearcat.netem.profiles import ProfileError
+    from bearcat.runtime.resume import ResumeError
     from bearcat.scenarios.faults import FaultError
     from bearcat.scenarios.schema import ScenarioError
     from bearcat.solvers.errors import InputError
@@ -72,6 +73,7 @@ def user_errors() -> tuple[type[BaseException], ...]:
 
     return (
         UsageError,
+        ResumeError,
         ScreenshotError,
         WriteError,
         MapError,

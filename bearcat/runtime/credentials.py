@@ -37,18 +37,28 @@ def members(scenario: Scenario, phones: tuple[str, ...] = ()) -> dict[str, str]:
 
 @contextmanager
 def run_authority(
-    out: Path, scenario: Scenario, given: Path | None, *, phones: tuple[str, ...] = (), hosts: tuple[str, ...] = ()
+    out: Path,
+    scenario: Scenario,
+    given: Path | None,
+    *,
+    phones: tuple[str, ...] = (),
+    hosts: tuple[str, ...] = (),
+    again: bool = False,
 ) -> Iterator[Path]:
     """``with run_authority(...) as directory:`` the certificates of a run into
     ``out``: ``given`` if it covers every peer of ``scenario`` in its role (a
     sentence naming the first that it does not, otherwise), else a new
     authority in ``out/certs`` whose certificates name ``hosts`` too (where
-    the router listens), spent when the run is over."""
+    the router listens), spent when the run is over; a run taken up
+    ``again`` keeps the one its dead launcher made, which it did not spend."""
     if given is not None:
         yield covering(given, scenario, phones)
         return
-    directory = make_authority(out / "certs", members(scenario, phones), hosts=hosts)
-    (directory / f"{AUTHORITY}.key").unlink()  # nobody issues more for a run of its own
+    if again:
+        directory = covering(out / "certs", scenario, phones).resolve()
+    else:
+        directory = make_authority(out / "certs", members(scenario, phones), hosts=hosts)
+        (directory / f"{AUTHORITY}.key").unlink()  # nobody issues more for a run of its own
     try:
         yield directory.resolve()
     finally:

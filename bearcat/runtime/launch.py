@@ -8,10 +8,12 @@ peer connects to, starts the ground station and one walker per agent (and for ea
 ``bearcat vehicle`` emulator on its own UDP port, PX4 SITL's 14540 + i
 convention moved to free ports, with a UAV peer flying it), waits
 until every peer's liveliness token is up, sends the start command and
-supervises: the run ends when the referee says so, when a peer process dies
-(the referee sees its token vanish and ends the game; the launcher ends the
-run itself if the ground station is the one that died), at the time limit,
-or on Ctrl-C. In every case the launcher then stops every peer it started
+supervises: the run ends when the referee says so (a walker whose peer
+died forfeits once its lease to rejoin runs out), at the time limit, or on
+Ctrl-C; a ground station or UAV peer that dies is started again as the
+scenario's ``[supervision]`` says (``supervisor``), and one that dies too
+often ends the run. A run whose launcher died is taken up again with
+``taken_up`` (``resume``). In every case the launcher then stops every peer it started
 (a stop command, then SIGTERM, then SIGKILL) and leaves no process behind.
 Agents driven from a keyboard, and the agents and UAVs a user names to
 join by hand (``joins``: a walker started in another terminal, a phone's
@@ -41,6 +43,7 @@ fault kills for good ends the run, naming the fault.
 from __future__ import annotations
 
 import json
+import time
 from contextlib import closing, nullcontext
 from pathlib import Path
 
@@ -57,6 +60,7 @@ from bearcat.runtime.credentials import covering, members, run_authority
 from bearcat.runtime.live_run import STARTUP, LiveOutcome, LiveRun, RunSettings, link_host_of
 from bearcat.runtime.peer_commands import free_port, started_by_hand
 from bearcat.runtime.peers import KernelPeers, LocalPeers
+from bearcat.runtime.resume import Launched, last_record, launcher_of, write_launched
 from bearcat.runtime.run_directory import write_scenario
 from bearcat.runtime.small_disk import SmallDisk
 from bearcat.scenarios.faults import LAUNCHER, PROCESS_KINDS, FaultError, refusal, write_faults
@@ -131,6 +135,7 @@ def launch(
     page: tuple[str, int] = ("0.0.0.0", 8443),
     provisional: bool = False,
     listen: tuple[Endpoint, ...] = (),
+    taken_up: Launched | None = None,
 ) -> LiveOutcome:
     """Run ``scenario`` live; ``scenario_ref`` is how the peers load it (a name or a path);
     ``certs`` a directory of certificates for every peer (``bearcat certs
@@ -147,7 +152,9 @@ def launch(
     their packets, "shim" leaves the impairment to each peer's shim;
     ``faults`` is the fault plan to apply (default: the scenario's);
     a ``provisional`` ground station starts on provisional sets where the
-    scenario's are not cached, and takes those up once solved."""
+    scenario's are not cached, and takes those up once solved; ``taken_up``
+    is how the run in ``out``, whose launcher died, was launched: this
+    launch takes it up again (``runtime.resume``)."""
     plan = scenario.faults if faults is None else tuple(faults)
     transport = transport or scenario.transport
     preflight(
@@ -180,8 +187,9 @@ def launch(
             page=page,
             provisional=provisional,
             listen=listen,
+            resumed=taken_up is not None,
         )
-        outcome = _play(settings, network=network, certs=certs)
+        outcome = _play(settings, network=network, certs=certs, taken_up=taken_up)
     if full is not None:  # the disk is back: say what the full one could not take
         _rewrite_outcome(out, outcome)
     _say_how_they_ended(out / "peers", outcome.peers)
@@ -192,17 +200,35 @@ def launch(
     return outcome
 
 
-def _play(settings: RunSettings, *, network: str, certs: Path | None) -> LiveOutcome:
+def _play(settings: RunSettings, *, network: str, certs: Path | None, taken_up: Launched | None) -> LiveOutcome:
     """Open the run's directory, network, authority, router and record, and play the run in them."""
     s = settings
     out, scenario = s.out, s.scenario
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "peers").mkdir(exist_ok=True)
-    write_scenario(out, scenario)
-    processes.begin(out)
-    if s.plan:
-        write_faults(out / "faults.toml", s.plan)
-    port = free_port()
+    if taken_up is None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "peers").mkdir(exist_ok=True)
+        write_scenario(out, scenario)
+        processes.begin(out)
+        if s.plan:
+            write_faults(out / "faults.toml", s.plan)
+    port = free_port() if taken_up is None else taken_up.port
+    launched = Launched(
+        scenario_ref=s.scenario_ref,
+        seed=s.seed,
+        netem=s.netem,
+        transport=s.transport,
+        network=network,
+        secure=s.secure,
+        certs=None if certs is None else str(certs.resolve()),
+        phones=s.phones,
+        joins=s.joins,
+        page=s.page,
+        provisional=s.provisional,
+        listen=tuple(str(e) for e in s.listen),
+        port=port,
+        launchers=(*(() if taken_up is None else taken_up.launchers), launcher_of()),
+    )
+    write_launched(out, launched)
     places: LocalPeers
     if network == "kernel":
         places = KernelPeers(port, s.netem, s.seed, report=out / "network.json", secure=s.secure)
@@ -213,11 +239,10 @@ def _play(settings: RunSettings, *, network: str, certs: Path | None) -> LiveOut
     # The launcher is the hub: a router every peer joins as a client. A mesh
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
+    hosts = (*places.hosts, *remote.hosts(s.listen, addresses))
     with (
         places,
-        run_authority(
-            out, scenario, certs, phones=s.phones, hosts=(*places.hosts, *remote.hosts(s.listen, addresses))
-        ) as certs,
+        run_authority(out, scenario, certs, phones=s.phones, hosts=hosts, again=taken_up is not None) as certs,
         ZenohSession(
             LAUNCHER,
             config(
@@ -229,8 +254,13 @@ def _play(settings: RunSettings, *, network: str, certs: Path | None) -> LiveOut
             ),
             credentials=Credentials(certs, LAUNCHER),
         ) as session,
-        closing(EventLog(out / "events.jsonl")) as record,
+        closing(EventLog(out / "events.jsonl", append=taken_up is not None)) as record,
     ):
+        if taken_up is not None:
+            since = last_record(out)
+            now = time.time()
+            record.note(now, "resumed", since=since, gap=None if since is None else now - since)
+            s.say(f"{scenario.name}: taken up again after {0.0 if since is None else now - since:.1f} s")
         for name, pid in places.own_processes().items():
             processes.record(out, name, pid)
         s.say(places.describe(s.netem))

@@ -29,6 +29,7 @@ import asyncio
 import concurrent.futures
 import functools
 import logging
+import os
 import signal
 import threading
 import time
@@ -66,6 +67,7 @@ LINGER = 1.0  # s a peer stays up after the game ended
 POLL = 0.1
 AWAIT_POLL = 1.0  # s between looks in the cache for the sets a ground station awaits
 SHUTDOWN_WAIT = 2.0  # s a UAV peer waits, on its way out, for a vehicle that does not answer
+LAUNCHER_DIED = "the launcher died, and the peer with it (bearcat run --resume RUN takes the run up again)"
 BODILESS = ("guidance",)
 """Kinds of key whose messages a peer's own log records without their body
 when the run directory has the launcher's run-wide log (``events.jsonl``):
@@ -126,6 +128,7 @@ class PeerRun:
             session.subscribe_liveliness(
                 keys.alive(game, "ground-station", GROUND), lambda k, alive: self.soon(self._ground, k, alive)
             )
+        self.parent = os.getppid()  # a SIGTERM once it has changed is the launcher's death (``peers``)
         for sig in (signal.SIGINT, signal.SIGTERM):
             try:
                 self.loop.add_signal_handler(sig, self._interrupted)
@@ -232,7 +235,11 @@ class PeerRun:
         self.finished.set()
 
     def _interrupted(self) -> None:
-        self.why = "interrupted"
+        if _orphaned(self.parent):
+            self.why = LAUNCHER_DIED
+            self.record.note(time.time(), "launcher-died")
+        else:
+            self.why = "interrupted"
         self.finished.set()
 
     async def _ticker(self, agent) -> None:
@@ -276,6 +283,20 @@ class PeerRun:
             return
         done = self.clock.now()
         self.record.note(done, "warmed", seconds=round(done - began, 3))
+
+
+def _orphaned(parent: int) -> bool:
+    """Whether process ``parent``, which started this one, has died. A parent
+    killed with SIGKILL signals its children as its first thread exits, which
+    hands them to a thread of its own still exiting: this process's parent
+    is then the same number, but a zombie."""
+    if os.getppid() != parent:
+        return True
+    try:
+        text = Path(f"/proc/{parent}/stat").read_text()
+    except OSError:
+        return True
+    return text[text.rindex(")") + 2 :].split()[0] in ("Z", "X")
 
 
 def _run_wide(out) -> Path | None:

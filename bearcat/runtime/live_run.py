@@ -60,6 +60,7 @@ STARTUP = 60.0  # s for every peer to come up
 GRACE = 5.0  # s past the time limit before the launcher stops a game itself
 STOP_WAIT = 5.0  # s a peer gets to exit after the stop command, and again after SIGTERM
 LOOK = 0.5  # s between looks at who joined the router from other machines
+RESUMED_SEQ = 1_000_000  # the number of the control a run taken up again sends first: above any its first launcher sent
 
 
 @dataclass
@@ -97,6 +98,7 @@ class RunSettings:
     page: tuple[str, int] = ("0.0.0.0", 8443)
     provisional: bool = False
     listen: tuple[Endpoint, ...] = ()
+    resumed: bool = False  # the run is taken up again after its launcher died (``runtime.resume``)
 
 
 class LiveRun:
@@ -215,7 +217,7 @@ class LiveRun:
         pages = _pages(tuple(p for p in phones if p not in self.by_hand), s.page, s.out)
         self.how |= {name: server_how for name, (_, server_how) in pages.items()}
         for name in list(self.how):
-            self.children[name] = self.start_peer(name)
+            self.children[name] = self.start_peer(name, again=s.resumed)
         link_host = link_host_of(s.page[0], s.listen) if pages else ""
         for name, (server, _) in pages.items():
             _say_link(name, server, self.children[name], s.say, link_host)
@@ -269,7 +271,7 @@ class LiveRun:
         s = self.settings
         port = free_port(socket.SOCK_DGRAM)
         self.how[name] = ("uav", {"vehicle": f"udpin://0.0.0.0:{port}", "sysid": k + 1, "emulated": True})
-        flyer = self.children[name] = self.start_peer(name)
+        flyer = self.children[name] = self.start_peer(name, again=s.resumed)
         vehicle = f"vehicle-{name}"
         self.children[vehicle] = self.places.start_vehicle(
             flyer, vehicle_command(s.scenario, k, port), s.out / "peers" / f"{vehicle}.log"
@@ -338,8 +340,13 @@ class LiveRun:
             time.sleep(0.05)
 
     def begin(self) -> None:
-        """Arm the fault plan and send the start command."""
+        """Arm the fault plan and send the start command; a run taken up again
+        sends the resume command instead (a UAV whose emulated vehicle died
+        with the launcher takes off again), and keeps its game clock."""
         s = self.settings
+        if s.resumed:
+            self._take_up()
+            return
         if s.plan:
             self.injector = LiveFaults(
                 s.plan,
@@ -360,6 +367,16 @@ class LiveRun:
             self.injector.begin(begin.t)
         self.started_at = time.monotonic()
         s.say(f"{self.game}: {len(self.expected)} peers up; game started")
+
+    def _take_up(self) -> None:
+        s = self.settings
+        if s.plan:
+            s.say(f"{self.game}: the fault plan is not applied again: its faults before the gap stay recorded")
+        t0 = _game_start(s.out / "events.jsonl")
+        go = Control(t=time.time(), command="resume" if t0 is not None else "start", seq=RESUMED_SEQ)
+        self.session.put(keys.control(self.game), encode(go))
+        self.started_at = time.monotonic() - (0.0 if t0 is None else time.time() - t0)
+        s.say(f"{self.game}: {len(self.expected)} peers up; game taken up again")
 
     def supervise(self) -> str | None:
         """Wait for the end of the game, starting again each peer that dies
@@ -457,7 +474,8 @@ class LiveRun:
         children = self.children
         if not self._ended() and children:
             try:
-                stop = Control(t=time.time(), command="stop", reason=(reason or "")[:200], seq=2)
+                seq = RESUMED_SEQ + 1 if self.settings.resumed else 2
+                stop = Control(t=time.time(), command="stop", reason=(reason or "")[:200], seq=seq)
                 self.session.put(keys.control(self.game), encode(stop))
             except Exception:
                 log.exception("could not send the stop command")
@@ -511,8 +529,9 @@ def _pages(phones: tuple[str, ...], page: tuple[str, int], out: Path) -> dict[st
     if phones:
         (out / "phones").mkdir(mode=0o700, exist_ok=True)
     for k, name in enumerate(phones):
-        server = PageServer(host=page[0], port=page[1] + k, token=new_token())
         token_file = out / "phones" / f"{name}.token"
+        kept = token_file.read_text().strip() if token_file.exists() else ""  # a run taken up again keeps its links
+        server = PageServer(host=page[0], port=page[1] + k, token=kept or new_token())
         token_file.touch(mode=0o600)
         token_file.write_text(server.token + "\n")
         pages[name] = (server, ("phone", {"page": f"{server.host}:{server.port}", "token_file": str(token_file)}))
@@ -558,6 +577,15 @@ def agent_failures(peers: Path) -> dict[str, int]:
     for path in sorted(peers.glob("*.jsonl")):
         counts.update(e["agent"] for e in read_events(path) if e["event"] == FAILED)
     return dict(sorted(counts.items()))
+
+
+def _game_start(events: Path) -> float | None:
+    """When (Unix time) the game in a run's log started, by its referee's clock; None if it had not."""
+    for e in read_events(events):
+        message = e.get("message") if e["event"] == "sent" else None
+        if isinstance(message, dict) and message.get("type") == "state" and message["phase"] != "waiting":
+            return message["t"] - message["elapsed"]
+    return None
 
 
 def _why(logs: Path, name: str) -> str:

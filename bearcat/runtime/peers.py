@@ -8,7 +8,8 @@ real packets (``netem.kernel``); the ground station, on the launcher's
 laptop in the field, stays on the loopback.
 
 Either way every child dies with the launcher (the parent-death signal), so
-a launcher killed with SIGKILL leaves no peer running.
+a launcher killed with SIGKILL leaves no peer running; the signal is
+SIGTERM, on which a peer says in its log that the launcher died, and ends.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from bearcat.bus.zenoh_session import best_effort_endpoint
-from bearcat.netem.kernel.commands import die_with_parent
+from bearcat.netem.kernel.commands import die_saying_so
 
 NETWORKS = ("shim", "kernel")
 
@@ -151,5 +152,5 @@ def _child(command: list[str], log: Path, again: bool = False) -> subprocess.Pop
     # The child keeps its own copy of the log's descriptor; ours closes at once.
     with open(log, "a" if again else "w") as output:
         return subprocess.Popen(
-            command, stdout=output, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent
+            command, stdout=output, stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, preexec_fn=die_saying_so
         )

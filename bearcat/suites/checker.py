@@ -5,7 +5,9 @@ the scenario the run played), so it judges runs it did not start, simulated
 or live, as Jepsen's checkers judge a history. Each invariant is held,
 broken, or does not apply to the run (``None``), with one line of evidence:
 
-- ``logs``: every event log parses to its last line, the outcome is there,
+- ``logs``: every event log parses to its last line, the outcome is there
+  (or the peers saw their launcher die, and none took the run up: then
+  ``verdict`` says the run ended without one, and when),
   and every peer's log says how the peer ended;
 - ``reliable``: every reliable message (state, control, UAV tasks) reached
   each peer that listens to its key, unless a fault had cut that peer off,
@@ -69,6 +71,8 @@ WINDOW = 1.0  # s of truth before the verdict in which a capture must show
 ENDINGS = ("peer ", "vehicle ")
 RESTART_SLACK = 2.0  # s from a restart's due time to its process being started
 INVARIANTS = ("logs", "reliable", "verdict", "detection", "supervision", "failsafe", "plugins", "leftovers")
+JUDGED = ("did", "plugin", "fault", "fault-end", "gone", "alive", "died", "restarted", "launcher-died", "resumed")
+"""The events besides what was sent and received that an invariant reads."""
 DETECTABLE = ("kill", "stop", "restart", "pause", "partition", "outage")
 
 
@@ -122,7 +126,11 @@ class Run:
         self.seen = [e for e in self.events if e["event"] in ("gone", "alive")]
         self.deaths = [e for e in self.events if e["event"] == "died"]
         self.restarts = [e for e in self.events if e["event"] == "restarted"]
+        # When each launcher that took the run up found it last recorded, and took it up.
+        self.gaps = [(e["since"] or e["t"], e["t"]) for e in self.events if e["event"] == "resumed"]
         self._records = [e for log in self.peer_logs.values() for e in log] if self.peer_logs else self.events
+        orphaned = [e["t"] for e in self._records if e["event"] == "launcher-died"]
+        self.launcher_died: float | None = min(orphaned, default=None)  # when its peers first saw their launcher die
 
     def records(self) -> list[dict]:
         """What the peers sent and received: their own logs in a live run, the one log in a simulated one."""
@@ -153,7 +161,18 @@ class Run:
             return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "guidance")
         if what == "sent":
             return _kind(e.get("key", "")) in (*RELIABLE_KINDS, "truth")
-        return what in ("did", "plugin", "fault", "fault-end", "gone", "alive", "died", "restarted")
+        return what in (
+            "did",
+            "plugin",
+            "fault",
+            "fault-end",
+            "gone",
+            "alive",
+            "died",
+            "restarted",
+            "launcher-died",
+            "resumed",
+        )
 
     def _outcome(self) -> dict | None:
         try:
@@ -179,7 +198,7 @@ class Run:
 
 def _logs(run: Run) -> Finding:
     problems = [f"{name} is torn at line {n}" for name, n in run.torn.items()]
-    if run.outcome is None:
+    if run.outcome is None and run.launcher_died is None:
         problems.append("outcome.json is missing or unreadable")
     for log in sorted((run.directory / "peers").glob("*.log")):
         lines = [line for line in log.read_text(errors="replace").splitlines() if line.strip()]
@@ -191,6 +210,8 @@ def _logs(run: Run) -> Finding:
     if problems:
         return Finding("logs", False, "; ".join(problems))
     logs = 1 + len(run.peer_logs)
+    if run.outcome is None:
+        return Finding("logs", True, f"{logs} event log(s) parse to the last line; {_launcher_died(run)}")
     return Finding("logs", True, f"{logs} event log(s) parse to the last line; the outcome is there")
 
 
@@ -226,6 +247,8 @@ def _reliable(run: Run) -> Finding:
 def _verdict(run: Run) -> Finding:
     if run.unreadable is not None:
         return Finding("verdict", None, f"the scenario cannot be read here to judge it by: {run.unreadable}")
+    if run.outcome is None and run.launcher_died is not None:
+        return Finding("verdict", None, f"ended without a verdict: {_launcher_died(run)}")
     if run.outcome is None or run.scenario is None:
         return Finding("verdict", None, "no outcome or no scenario.toml to judge it by")
     reason, winner = run.outcome.get("reason", ""), run.outcome.get("winner")
@@ -522,6 +545,8 @@ def _cut_off(run: Run, t: float, *peers: str) -> bool:
         hit = names & set(fault.get("peers", [])) or fault["kind"] == "partition"
         if hit and start - 0.5 <= t <= end + lease:
             return True
+    if any(start - 0.5 <= t <= end + lease for start, end in run.gaps):
+        return True  # every peer died with the launcher
     return any(death["peer"] in names and start - 0.5 <= t <= end + lease for death, start, end in _absences(run))
 
 
@@ -565,6 +590,17 @@ def _game_end(run: Run) -> float | None:
         if e["event"] == "sent" and _kind(e["key"]) == "state" and e["message"]["phase"] == "ended"
     ]
     return min(ended) if ended else None
+
+
+def _launcher_died(run: Run) -> str:
+    """When the launcher of a run without an outcome died, as its peers saw it."""
+    assert run.launcher_died is not None
+    states = [e["message"] for e in run.events if e["event"] == "sent" and _kind(e["key"]) == "state"]
+    running = next((m for m in states if m["phase"] != "waiting"), None)
+    when = "before the game started"
+    if running is not None:
+        when = f"{run.launcher_died - (running['t'] - running['elapsed']):.1f} s into the game"
+    return f"the launcher died {when}, and no bearcat run --resume took the run up"
 
 
 def _run_end(run: Run) -> float:

@@ -53,11 +53,17 @@ def await_namespace(pid: int, name: str, timeout: float) -> None:
     raise KernelError(f"{name} never got a network namespace of its own (unshare --net failed?)")
 
 
-def die_with_parent() -> None:
-    """In a child before it runs its program: SIGKILL it when its parent dies.
-    The signal outlives ``exec``, so a program started this way dies with the
-    launcher however the launcher ends."""
-    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL)
+def die_with_parent(sig: int = signal.SIGKILL) -> None:
+    """In a child before it runs its program: send it ``sig`` when its parent
+    dies. The signal outlives ``exec``, so a program started this way dies
+    with the launcher however the launcher ends; a peer, sent SIGTERM, says
+    so in its log on its way out."""
+    ctypes.CDLL(None, use_errno=True).prctl(_PR_SET_PDEATHSIG, sig)
+
+
+def die_saying_so() -> None:
+    """``die_with_parent`` by SIGTERM, which a peer and a vehicle end on cleanly, saying why."""
+    die_with_parent(signal.SIGTERM)
 
 
 _PR_SET_PDEATHSIG = 1

@@ -36,7 +36,7 @@ import threading
 import time
 from pathlib import Path
 
-from bearcat.netem.kernel.commands import KernelError, await_namespace, die_with_parent, inside, run
+from bearcat.netem.kernel.commands import KernelError, await_namespace, die_saying_so, die_with_parent, inside, run
 
 log = logging.getLogger(__name__)
 
@@ -160,7 +160,11 @@ class KernelNetwork:
         k = self._links = self._links + 1
         if k > MAX_PEERS:
             raise KernelError(f"a kernel network holds at most {MAX_PEERS} peers")
-        gate = ["unshare", "--net", "--fork", "--kill-child", "sh", "-c", 'read -r _ && exec "$@"', "gate", *argv]
+        # The peer is unshare's child: SIGTERM when unshare dies with the launcher, so it says why it ends.
+        gate = [
+            *("unshare", "--net", "--fork", "--kill-child=SIGTERM"),
+            *("sh", "-c", 'read -r _ && exec "$@"', "gate", *argv),
+        ]
         child = subprocess.Popen(
             gate, stdin=subprocess.PIPE, stdout=log_file, stderr=subprocess.STDOUT, preexec_fn=die_with_parent
         )
@@ -209,7 +213,7 @@ class KernelNetwork:
             stdout=log_file,
             stderr=subprocess.STDOUT,
             stdin=subprocess.DEVNULL,
-            preexec_fn=die_with_parent,
+            preexec_fn=die_saying_so,
         )
 
     def start(self, t: float) -> None:
