@@ -239,10 +239,16 @@ def _play(settings: RunSettings, *, network: str, certs: Path | None, taken_up: 
     # The launcher is the hub: a router every peer joins as a client. A mesh
     # of peers costs a link per pair, and with dozens of peers on a small
     # host it delays and drops fixes (benchmarks/field.py, --mode).
-    hosts = (*places.hosts, *remote.hosts(s.listen, addresses))
     with (
-        places,
-        run_authority(out, scenario, certs, phones=s.phones, hosts=hosts, again=taken_up is not None) as certs,
+        places,  # entered first: a kernel network's addresses are known once it is up
+        run_authority(
+            out,
+            scenario,
+            certs,
+            phones=s.phones,
+            hosts=(*places.hosts, *remote.hosts(s.listen, addresses)),
+            again=taken_up is not None,
+        ) as certs,
         ZenohSession(
             LAUNCHER,
             config(

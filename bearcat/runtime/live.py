@@ -236,10 +236,14 @@ class PeerRun:
 
     def _interrupted(self) -> None:
         if _orphaned(self.parent):
-            self.why = LAUNCHER_DIED
+            # The router died with the launcher: there is nobody left to say
+            # goodbye to, and a session closing over a network that died too
+            # (a kernel network's hub) would wait out Zenoh's close timeout.
+            # Every line of the event log is written already.
             self.record.note(time.time(), "launcher-died")
-        else:
-            self.why = "interrupted"
+            print(f"peer {self.session.name}: {LAUNCHER_DIED}", flush=True)
+            os._exit(0)
+        self.why = "interrupted"
         self.finished.set()
 
     async def _ticker(self, agent) -> None:
