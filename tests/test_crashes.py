@@ -114,7 +114,10 @@ def test_a_ground_station_killed_at_a_random_moment_is_restarted_and_every_fake_
 def test_a_uav_peer_killed_at_a_random_moment_is_restarted_and_the_search_ends_with_its_verdict(
     tmp_path, game, network
 ):
-    """On a kernel network the peer starts again in its vehicle's namespace."""
+    """``bearcat run`` on the search scenario: a vehicle emulator and a UAV
+    peer beside the ground station and the walkers, the UAV armed, flown and
+    tasked over MAVLink and Zenoh, killed mid-game and started again (on a
+    kernel network, in its vehicle's namespace); every process gone at the end."""
     moment = random.Random(game).uniform(2.0, 10.0)
     # The 35-point game the search-game tests solve too, from the same cache.
     text = (
@@ -132,6 +135,19 @@ def test_a_uav_peer_killed_at_a_random_moment_is_restarted_and_the_search_ends_w
     finally:
         if launcher.poll() is None:
             launcher.kill()
+    outcome = json.loads((out / "outcome.json").read_text())
+    assert set(outcome["peers"]) >= {"q1", "vehicle-q1"} and all(c == 0 for c in outcome["peers"].values()), outcome
+    events = read_events(out / "events.jsonl")
+    restarted = next(e["t"] for e in events if e["event"] == "restarted")
+    flown = [
+        (e["t"], e["message"]["alt"])
+        for e in events
+        if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "q1"
+    ]
+    assert max(alt for _, alt in flown) > 15.0
+    tasks = [e["t"] for e in events if e["event"] == "sent" and e["message"].get("type") == "uav-task"]
+    assert sum(t > restarted for t in tasks) >= 3  # tasked on after its restart
+    assert (out / "recording.rrd").exists()
 
 
 def test_a_ground_station_that_dies_past_its_intensity_ends_the_game_saying_so(tmp_path):

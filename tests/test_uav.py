@@ -5,7 +5,6 @@ emulator its own ``bearcat vehicle`` process)."""
 from __future__ import annotations
 
 import asyncio
-import json
 import math
 import os
 import socket
@@ -476,45 +475,6 @@ def test_camera_reports_an_opponent_inside_its_footprint_only():
     sends = seen(6.0, 6.0, 6.1)
     assert len(sends) == 1 and sends[0].key == keys.detection(GAME, "q1") and sends[0].message.agent == "defender"
     assert seen(6.0, 6.0, 6.5) == []  # at most once a second per agent
-
-
-def test_a_live_search_game_flies_the_uav_through_mavsdk_and_leaves_no_process(tmp_path):
-    """``bearcat run`` on the search scenario: a vehicle emulator and a UAV peer
-    beside the ground station and the walkers, the UAV armed, flown and
-    tasked over MAVLink and Zenoh; every process gone at the end."""
-    from bearcat.agents.ground_station.event_log import read_events
-    from bearcat.scenarios.schema import load_scenario
-
-    # The 35-point game the search-game tests solve too, from the same cache.
-    text = (
-        load_scenario("search")
-        .text.replace("grid = 45", "grid = 35")
-        .replace("time_limit = 240.0", "time_limit = 25.0")
-    )
-    path = tmp_path / "search.toml"
-    path.write_text(text)
-    out = tmp_path / "run"
-    run = subprocess.run(
-        [sys.executable, "-m", "bearcat", "run", str(path), "--out", str(out)],
-        capture_output=True,
-        text=True,
-        timeout=300,
-    )
-    assert run.returncode == 0, run.stdout + run.stderr
-    outcome = json.loads((out / "outcome.json").read_text())
-    assert outcome["ended"] and set(outcome["peers"]) >= {"q1", "vehicle-q1"}, outcome
-    assert all(code == 0 for code in outcome["peers"].values()), outcome["peers"]
-    events = read_events(out / "events.jsonl")
-    climbed = [
-        e["message"]["alt"]
-        for e in events
-        if e["event"] == "sent" and e["message"].get("type") == "truth" and e["message"]["agent"] == "q1"
-    ]
-    assert climbed and max(climbed) > 15.0
-    assert sum(e["event"] == "sent" and e["message"].get("type") == "uav-task" for e in events) >= 5
-    assert (out / "recording.rrd").exists()
-    left = subprocess.run(["pgrep", "-f", str(path)], capture_output=True, text=True).stdout.split()
-    assert left == []
 
 
 def test_a_uav_peer_whose_vehicle_died_still_stops_when_told(tmp_path):

@@ -44,6 +44,9 @@ whether their phone shows reachability guidance::
     search_options = {}          # the policy's options
     steer = "goto"               # goto | velocity (offboard setpoints)
 
+    [supervision]                # optional: which peers a live run starts again (scenarios.supervision)
+    max_restarts = 3
+
 The Structs below are the schema: every key with its type, its bounds and
 its default, declared once. msgspec checks a file against them; a second
 pass checks what needs the map (starts, hold points and waypoints in the
