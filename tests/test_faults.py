@@ -112,16 +112,29 @@ def test_simulate_refuses_what_it_cannot_apply_before_the_run(tmp_path, capsys):
     assert not any((tmp_path / "out").glob("seed-*/events.jsonl"))
 
 
-def test_a_run_refuses_a_process_fault_on_an_agent_joined_by_hand_before_anything_starts(tmp_path, capsys):
-    """The launcher starts no process for an agent named with --joins, so it
-    has nothing to kill: one sentence, and no run directory."""
+@pytest.mark.parametrize(
+    ("fault", "why"),
+    [
+        ('kind = "restart"', "no launcher holds its process to start it again"),
+        ('kind = "cpu"\nduration = 4.0', "starving it takes a cgroup on its own machine"),
+    ],
+)
+def test_a_run_refuses_what_a_peer_joined_by_hand_cannot_do_to_itself_before_anything_starts(
+    tmp_path, capsys, fault, why
+):
+    """The launcher holds no process of an agent named with --joins: the
+    peer kills, stops or pauses itself on the launcher's notice, but cannot
+    start itself again or cap its own CPU. One sentence, and no run directory."""
     path = tmp_path / "game.toml"
     path.write_text(scenario_text())
     plan = tmp_path / "plan.toml"
-    plan.write_text('[[fault]]\nkind = "kill"\ntarget = "defender"\nat = 3.0\n')
+    plan.write_text(f'[[fault]]\n{fault}\ntarget = "defender"\nat = 3.0\n')
     out = tmp_path / "out"
     assert main(["run", str(path), "--faults", str(plan), "--joins", "defender", "--out", str(out)]) == 2
-    assert "fault[0] (kill) targets defender, whose peer is started by hand" in capsys.readouterr().err
+    kind = fault.split('"')[1]
+    said = capsys.readouterr().err
+    assert f"fault[0] ({kind}) targets defender, whose peer is started by hand: {why}" in said
+    assert "applies kill, stop, pause itself" in said
     assert not out.exists()
 
 

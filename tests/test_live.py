@@ -37,9 +37,10 @@ from bearcat.runtime.live import run_peer
 from bearcat.runtime.live_run import agent_failures
 from bearcat.runtime.peer_commands import free_port
 from bearcat.scenarios.cast import build_cast
+from bearcat.scenarios.faults import parse_faults, write_faults
 from bearcat.scenarios.schema import load_scenario
 from tests.support.faulty import Faulty
-from tests.support.live_runs import game_started, start_launcher, wait_for
+from tests.support.live_runs import game_started, printed_command, start_launcher, wait_for
 from tests.support.scenario_files import write_scenario
 
 
@@ -356,13 +357,20 @@ def test_a_walker_whose_ground_station_is_gone_for_a_lease_stops_by_itself_sayin
 def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_station(tmp_path):
     from bearcat.runtime.live import fetch_scenario
 
-    launcher, out, _path = start_run(tmp_path, time_limit=60.0, netem="ideal")
+    plan, faults = (
+        tmp_path / "plan.toml",
+        parse_faults([{"kind": "degrade", "target": "attacker", "profile": "3g", "at": 50.0, "duration": 1.0}]),
+    )
+    write_faults(plan, faults)
+    out = tmp_path / "run"
+    launcher = start_launcher(write_scenario(tmp_path, time_limit=60.0, netem="ideal"), out, "--faults", str(plan))
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
         endpoint = json.loads((out / "endpoint.json").read_text())["endpoint"]
         scenario = fetch_scenario("test-game", [endpoint])
         assert scenario.name == "test-game" and scenario.map.bounds == (0.0, 0.0, 50.0, 50.0)
         assert scenario.ids == ["attacker", "defender"] and scenario.map.region("home")
+        assert scenario.faults == faults  # the run's plan, which such a peer applies where it falls on it
         launcher.send_signal(signal.SIGINT)
         try:
             launcher.communicate(timeout=120)
@@ -374,14 +382,6 @@ def test_a_peer_started_elsewhere_fetches_the_scenario_and_map_from_the_ground_s
             launcher.kill()
 
 
-def _printed_command(launcher, marker: str) -> list[str]:
-    """The command the launcher printed for a peer to start by hand: the first of its lines holding ``marker``."""
-    for line in launcher.stdout:
-        if marker in line:
-            return line.split()
-    pytest.fail(f"the launcher ended without printing a command with {marker!r}")
-
-
 def test_an_agent_named_to_join_by_hand_is_waited_for_and_plays(tmp_path, env):
     """``bearcat run --joins defender`` starts no walker for the defender:
     it prints the command, waits for the peer, and plays with it."""
@@ -390,7 +390,7 @@ def test_an_agent_named_to_join_by_hand_is_waited_for_and_plays(tmp_path, env):
     launcher = start_launcher(path, out, "--joins", "defender")
     person = None
     try:
-        command = _printed_command(launcher, "bearcat peer walker")
+        command = printed_command(launcher, "bearcat peer walker")
         assert command[command.index("--id") + 1] == "defender"
         assert wait_for(lambda: (out / "peers" / "gs.log").exists(), 60)
         time.sleep(3.0)
@@ -437,7 +437,7 @@ def test_a_phone_page_served_by_hand_joins_a_launched_game(tmp_path, env):
     launcher = start_launcher(path, out, "--phone", "attacker", "--joins", "attacker")
     bridge = None
     try:
-        command = _printed_command(launcher, " phone --connect")
+        command = printed_command(launcher, " phone --connect")
         assert command[command.index("--id") + 1] == "attacker"
         command += ["--listen", f"127.0.0.1:{free_port()}", "--token-file", str(tmp_path / "token")]
         bridge = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, env=env)

@@ -30,10 +30,10 @@ def access_control(game: str, members: dict[str, str]) -> dict:
             ("read", _READER, reads(role, name, game)),
             ("watch", _WATCHER, watches(role, name, game)),
             ("token", _TOKEN, _tokens(role, name, game)),
-            ("ask", _ASKER, [keys.map_query(game), keys.scenario_query(game)]),
+            ("ask", _ASKER, _served(game)),
         ]
         if role == "ground-station":
-            grants.append(("serve", _SERVER, [keys.map_query(game), keys.scenario_query(game)]))
+            grants.append(("serve", _SERVER, _served(game)))
         # A publisher learns who subscribes (and so whether to send at all)
         # from the subscriptions the router passes on, which name wildcards
         # (the ground station's every fix): it hears of them all. They name
@@ -65,6 +65,11 @@ def access_control(game: str, members: dict[str, str]) -> dict:
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def _served(game: str) -> list[str]:
+    """What the ground station serves a peer started elsewhere: the map, the scenario and the fault plan."""
+    return [keys.map_query(game), keys.scenario_query(game), keys.plan_query(game)]
 
 
 def _tokens(role: str, name: str, game: str) -> list[str]:

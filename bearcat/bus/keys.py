@@ -48,6 +48,7 @@ _KINDS = {
     "alive": ("alive", "{}", "{}"),
     "map": ("map",),
     "scenario": ("scenario",),
+    "plan": ("plan",),
 }
 
 
@@ -116,6 +117,11 @@ def map_query(game: str) -> str:
 
 def scenario_query(game: str) -> str:
     return _key(game, "scenario")
+
+
+def plan_query(game: str) -> str:
+    """Where the ground station serves the run's fault plan, to peers started on other machines."""
+    return _key(game, "plan")
 
 
 def every(game: str, kind: str) -> str:

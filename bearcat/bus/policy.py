@@ -10,7 +10,7 @@ both halves, by common name, before anything reaches a peer
 role               publishes                          reads
 =================  =================================  =========================================
 ground-station     guidance, state, uav tasks,        every fix, truth, detection, control,
-                   the map and scenario               state; every peer's liveliness
+                   the map, scenario and fault plan   state; every peer's liveliness
 launcher           control, fault notices             everything (it records the game)
 walker NAME        fix/NAME, truth/NAME (simulated)   guidance/NAME, state, control, faults
 phone NAME         fix/NAME                           guidance/NAME, state, control, faults
@@ -30,7 +30,7 @@ from bearcat.bus.errors import BusError
 
 # Kinds of key each role may publish on; "own" kinds only under its own name.
 _ANY = {
-    "ground-station": frozenset({"guidance", "state", "uav-task", "map", "scenario"}),
+    "ground-station": frozenset({"guidance", "state", "uav-task", "map", "scenario", "plan"}),
     "launcher": frozenset({"control", "fault"}),
 }
 _OWN = {

@@ -163,6 +163,7 @@ class ZenohSession:
             raise
         self._publishers: dict[tuple[str, bool], zenoh.Publisher] = {}
         self._declared: list = []  # subscribers and tokens, undeclared on close
+        self._tokens: dict[str, zenoh.LivelinessToken] = {}
         self._attachment = self.name.encode()
 
     def __enter__(self) -> ZenohSession:
@@ -219,7 +220,14 @@ class ZenohSession:
 
     def declare_token(self, key: str) -> None:
         self._check_open()
-        self._declared.append(self._session.liveliness().declare_token(key))
+        token = self._tokens[key] = self._session.liveliness().declare_token(key)
+        self._declared.append(token)
+
+    def withdraw_token(self, key: str) -> None:
+        """Undeclare the token on ``key``: to the others its holder is gone, though the session stands."""
+        token = self._tokens.pop(key)
+        self._declared.remove(token)
+        token.undeclare()
 
     def subscribe_liveliness(self, key_expr: str, callback: LivelinessCallback, *, history: bool = True) -> None:
         self._check_open()

@@ -63,7 +63,7 @@ from bearcat.runtime.peers import KernelPeers, LocalPeers
 from bearcat.runtime.resume import Launched, last_record, launcher_of, write_launched
 from bearcat.runtime.run_directory import write_scenario
 from bearcat.runtime.small_disk import SmallDisk
-from bearcat.scenarios.faults import LAUNCHER, PROCESS_KINDS, FaultError, refusal, write_faults
+from bearcat.scenarios.faults import BY_ITSELF, LAUNCHER, NOT_BY_ITSELF, FaultError, refusal, write_faults
 from bearcat.scenarios.schema import Scenario
 
 ENDING = ("peer ", "vehicle ")  # how the last line of a peer's or a vehicle's log starts
@@ -92,10 +92,10 @@ def preflight(
             f"{scenario.source}: there is no agent or UAV {unknown[0]!r} to join by hand; they are {', '.join(peers)}"
         )
     for k, fault in enumerate(plan):
-        if fault.kind in PROCESS_KINDS and fault.target in started_by_hand(scenario, joins):
+        if fault.kind in NOT_BY_ITSELF and fault.target in started_by_hand(scenario, joins):
             raise FaultError(
-                f"fault[{k}] ({fault.kind}) targets {fault.target}, whose peer is started by hand, "
-                "not by the launcher: it has no process of the launcher's to act on"
+                f"fault[{k}] ({fault.kind}) targets {fault.target}, whose peer is started by hand: "
+                f"{NOT_BY_ITSELF[fault.kind]} (a peer started by hand applies {', '.join(BY_ITSELF)} itself)"
             )
     if secure and transport != "tcp":
         raise BusError(

@@ -20,13 +20,16 @@ A run with a fault plan announces each fault as it begins on the game's
 fault key; the peer applies what concerns it (``fault_effects``): its
 shim cuts or degrades links (on the shim only: on a kernel network the
 hub drops the packets), its agents' clock jumps or drifts, its phone's
-GPS lies. Only the launcher announces faults.
+GPS lies, and a peer a person started kills, stops or pauses itself, as
+the launcher holds no process of it to signal. Only the launcher
+announces faults.
 """
 
 from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import dataclasses
 import functools
 import logging
 import os
@@ -54,7 +57,7 @@ from bearcat.netem.shim import Shim
 from bearcat.runtime.dispatch import Dispatcher
 from bearcat.runtime.peer_spec import PeerSpec
 from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, skewed
-from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
+from bearcat.scenarios.faults import BY_ITSELF, GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
 from bearcat.scenarios.schema import ScenarioError
 from bearcat.solvers.ctf.queries import CtfQueries
 
@@ -213,12 +216,41 @@ class PeerRun:
                 self.dispatch.clocks[agent.name] = skewed(fault, notice.start)
             if notice.end is not None:
                 loop.call_later(notice.end - now, lambda: [self.dispatch.clocks.pop(a.name, None) for a in self.agents])
+        elif fault.kind in BY_ITSELF and fault.target == self.session.name:
+            self._by_itself(notice.fault, fault)
         elif isinstance(fault, Gps):
             for agent in self.agents:
                 if agent.name == fault.target and hasattr(agent, "phone"):  # a real phone's GPS is its own
                     agent.phone.lie = lie(fault)
                     if notice.end is not None:
                         loop.call_later(notice.end - now, setattr, agent.phone, "lie", None)
+
+    def _by_itself(self, k: int, fault) -> None:
+        """A process fault on this peer, which a person started, so no
+        launcher holds its process to signal. A kill is a real SIGKILL, with
+        no goodbye; a stop ends the peer cleanly, as SIGTERM would. A pause
+        freezes the event loop, so nothing ticks and what arrives waits, as
+        SIGSTOP would; its session's threads run on, so where the router
+        would drop a frozen process's session, at the lease, the peer
+        withdraws its tokens instead, and the terminal it runs in stays the
+        person's."""
+        said = f"fault[{k}] ({fault.describe()})"
+        self.record.note(self.clock.now(), "fault-applied", fault=k, kind=fault.kind)
+        if fault.kind == "kill":
+            print(f"peer {self.session.name}: killed by {said}", flush=True)
+            os.kill(os.getpid(), signal.SIGKILL)
+        elif fault.kind == "stop":
+            self.why = f"stopped by {said}"
+            self.finished.set()
+        else:
+            held = fault.duration if self.lease is None else min(self.lease, fault.duration)
+            time.sleep(held)
+            tokens = [keys.alive(self.game, a.role, a.name) for a in self.agents] if held < fault.duration else []
+            for key in tokens:
+                self.session.withdraw_token(key)
+            time.sleep(fault.duration - held)
+            for key in tokens:
+                self.session.declare_token(key)
 
     def _ground(self, key, alive) -> None:
         """The ground station's token came or went: a player's peer waits a lease for it, then stops."""
@@ -390,6 +422,8 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
             geojson = dumps(scenario.map, units="metres").encode()
             session.serve(keys.map_query(scenario.name), lambda: geojson)
             session.serve(keys.scenario_query(scenario.name), lambda: scenario.text.encode())
+            plan_text = b"" if spec.faults is None else Path(spec.faults).read_bytes()
+            session.serve(keys.plan_query(scenario.name), lambda: plan_text)
         if world.zones is not None:
             # Dead zones need the position of each end of a link, which in
             # simulation the truth tells: a player's peer needs only its own
@@ -594,15 +628,18 @@ async def _fly(autopilot, peer) -> str:
 def fetch_scenario(
     game: str, connect, timeout: float = 10.0, *, certs=None, name: str | None = None, secure: bool = False
 ):
-    """The scenario and map the ground station of ``game`` serves (``bearcat peer --scenario zenoh:GAME``);
-    with ``certs``, asked as peer ``name`` and taken only from a provable ground station (over
-    ``tls/`` when ``secure``)."""
+    """The scenario, map and fault plan the ground station of ``game``
+    serves (``bearcat peer --scenario zenoh:GAME``); with ``certs``, asked
+    as peer ``name`` and taken only from a provable ground station (over
+    ``tls/`` when ``secure``). The run's plan, which the peer applies where
+    it falls on it, replaces any the scenario's text holds."""
     import time
 
     from bearcat.bus.errors import BusError
     from bearcat.bus.identity import Credentials
     from bearcat.bus.zenoh_session import ZenohSession, config
     from bearcat.maps.geojson import parse_geojson
+    from bearcat.scenarios.faults import parse_plan
     from bearcat.scenarios.schema import parse_scenario
 
     if certs is not None and name is None:
@@ -614,16 +651,19 @@ def fetch_scenario(
     how = config(connect=connect, listen=[], mode="client", tls=credentials) if secure else config(connect=connect)
     with ZenohSession(asker, how, credentials=credentials) as session:
         end = time.monotonic() + timeout
-        text = geojson = None
-        while time.monotonic() < end and (text is None or geojson is None):
+        text = geojson = plan = None
+        while time.monotonic() < end and (text is None or geojson is None or plan is None):
             text = text or session.fetch(keys.scenario_query(game), timeout=1.0)
             geojson = geojson or session.fetch(keys.map_query(game), timeout=1.0)
-    if text is None or geojson is None:
+            plan = plan if plan is not None else session.fetch(keys.plan_query(game), timeout=1.0)
+    if text is None or geojson is None or plan is None:
         raise BusError(
             f"no ground station of game {game!r} answered at {', '.join(connect) or 'the default endpoints'}"
         )
     game_map = parse_geojson(geojson.decode(), source=f"the map of game {game}", default_name=game)
-    return parse_scenario(text.decode(), source=f"the scenario of game {game}", game_map=game_map)
+    scenario = parse_scenario(text.decode(), source=f"the scenario of game {game}", game_map=game_map)
+    faults = parse_plan(plan.decode(), scenario, source=f"the fault plan of game {game}")
+    return dataclasses.replace(scenario, faults=faults)
 
 
 def _read_keys(behaviour: TakesKeys) -> None:

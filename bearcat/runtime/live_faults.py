@@ -8,7 +8,9 @@ truth says when it went). When a fault is due:
 - process faults are real signals to the peer's process tree: SIGKILL,
   SIGTERM, SIGSTOP then SIGCONT, a kill and a fresh start that resumes
   from the peer's own log; CPU starvation moves the tree into a cgroup
-  capped at a share of one core;
+  capped at a share of one core. A peer started by hand, whose process
+  the launcher does not hold, is told as of a network fault, and kills,
+  stops or pauses itself;
 - network, clock and GPS faults are announced on the game's fault key
   (``FaultNotice``: which fault of the plan, from when until when, on the
   launcher's clock), and every peer applies what concerns it
@@ -35,7 +37,7 @@ from bearcat.bus import keys
 from bearcat.bus.codec import encode
 from bearcat.bus.messages import FaultNotice, GameState, Truth
 from bearcat.scenarios.fault_effects import noted, sides
-from bearcat.scenarios.faults import GROUND, Fault, Restart
+from bearcat.scenarios.faults import BY_ITSELF, GROUND, Fault, Restart
 
 log = logging.getLogger(__name__)
 
@@ -138,7 +140,10 @@ class LiveFaults:
     def _apply(self, k: int, fault: Fault, now: float) -> None:
         with self.lock:
             self.applied.append(noted(self.record, k, fault, now))
-        getattr(self, "_" + fault.kind.replace("-", "_"))(k, fault, now)
+        if fault.kind in BY_ITSELF and not set(fault.peers()) & set(self.children):  # a peer started by hand
+            self._announce(k, fault, now)
+        else:
+            getattr(self, "_" + fault.kind.replace("-", "_"))(k, fault, now)
         if fault.ends is not None:
             self._ends.append((now + fault.ends, k, fault))
 

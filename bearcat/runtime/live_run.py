@@ -294,10 +294,10 @@ class LiveRun:
         for name in (p for p in (*s.scenario.ids, *uavs) if p in self.by_hand):
             role = "uav" if name in uavs else "walker"
             spec = self.spec(role, name, at, **({"vehicle": VEHICLE} if role == "uav" else {}))
-            # Started by hand on the host's own network, with no process of the launcher's for a fault to act on.
-            spec = msgspec.structs.replace(spec, faults=None, network="shim")
-            if self.elsewhere:
-                spec = msgspec.structs.replace(spec, scenario=f"zenoh:{self.game}", out=None)
+            # Started by hand on the host's own network; it applies the plan's faults on itself (``PeerRun``).
+            spec = msgspec.structs.replace(spec, network="shim")
+            if self.elsewhere:  # the scenario, map and plan come from the ground station
+                spec = msgspec.structs.replace(spec, scenario=f"zenoh:{self.game}", out=None, faults=None)
             bridge = [*program, "phone", "--connect", at, "--game", self.game, "--id", name, "--certs", str(self.certs)]
             bridge += [] if spec.out is None else ["--out", spec.out]
             bridge += ["--secure"] if s.secure else []

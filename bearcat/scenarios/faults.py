@@ -194,6 +194,15 @@ Fault = Kill | Stop | Pause | Restart | Partition | Heal | Outage | Degrade | Cl
 KINDS = tuple(kind.__struct_config__.tag for kind in Fault.__args__)
 PROCESS_KINDS = ("kill", "stop", "pause", "restart", "cpu")
 
+#: Process faults a peer started by hand cannot apply to itself, and why. No
+#: launcher holds its process, so it applies the others (``BY_ITSELF``) on
+#: the launcher's notice; these are refused before the run.
+NOT_BY_ITSELF = {
+    "restart": "no launcher holds its process to start it again",
+    "cpu": "starving it takes a cgroup on its own machine, which the launcher cannot reach",
+}
+BY_ITSELF = tuple(kind for kind in PROCESS_KINDS if kind not in NOT_BY_ITSELF)
+
 #: What each runtime cannot do, and why: a fault of these kinds is refused before the run.
 CANNOT = {
     "simulate": {
@@ -221,18 +230,25 @@ def load_faults(path: str | Path, scenario) -> tuple[Fault, ...]:
     """The faults in plan file ``path``, checked against ``scenario``."""
     path = Path(path)
     try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise FaultError(f"there is no fault plan {str(path)!r}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise FaultError(f"{path} is not valid TOML: {exc}") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise FaultError(f"{path} cannot be read: {exc}") from None
+    return parse_plan(text, scenario, source=str(path))
+
+
+def parse_plan(text: str, scenario, *, source: str) -> tuple[Fault, ...]:
+    """The faults in the text of a plan file from ``source``, checked against ``scenario``."""
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise FaultError(f"{source} is not valid TOML: {exc}") from None
     try:
         plan = convert(data, PlanFile).fault
         check_faults(plan, scenario.agents, scenario.uavs, scenario.committing)
     except Invalid as exc:
-        raise FaultError(f"{path}: {exc}") from None
+        raise FaultError(f"{source}: {exc}") from None
     return plan
 
 

@@ -268,7 +268,7 @@ def _verdict(run: Run) -> Finding:
     s = run.scenario
     if " is gone" in reason:
         gone = reason.split(" is gone")[0].split()[-1]
-        fault = next((f for f in run.faults if gone in f.get("peers", [])), None)
+        fault = next((f for f in reversed(run.faults) if gone in f.get("peers", []) and f["t"] <= t_end), None)
         death = next((e for e in run.deaths if e["peer"] == gone and not e["restart"]), None)
         if fault is None and death is not None:
             return Finding("verdict", True, f"{reason}: it died with code {death['code']} and {death['why']}")

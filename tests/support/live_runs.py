@@ -5,6 +5,8 @@ import subprocess
 import sys
 import time
 
+import pytest
+
 from bearcat.agents.ground_station.event_log import read_events
 
 
@@ -33,3 +35,11 @@ def wait_for(predicate, timeout) -> bool:
             return True
         time.sleep(0.1)
     return predicate()
+
+
+def printed_command(launcher, marker: str) -> list[str]:
+    """The command the launcher printed for a peer to start by hand: the first of its lines holding ``marker``."""
+    for line in launcher.stdout:
+        if marker in line:
+            return line.split()
+    pytest.fail(f"the launcher ended without printing a command with {marker!r}")
