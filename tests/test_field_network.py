@@ -20,6 +20,7 @@ They need root for the namespaces and skip, saying why, without it.
 import json
 import os
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -146,9 +147,11 @@ def field(tmp_path_factory):
         walker, flyer = printed(launcher, found["said"], 2)
         found["commands"] = (walker, flyer)
         printing = {"stdout": subprocess.PIPE, "text": True, "env": env}  # what a program prints, not its logs
+        there = found["companion disk"] = base / "companion"  # where the field computer keeps its own logs
+        there.mkdir()
         net.start("companion", vehicle_command(scenario, 0, 14540), stdout=subprocess.DEVNULL, env=env)
-        uav = net.start("companion", [*flyer, "--emulated"], stdout=subprocess.DEVNULL, env=env)
-        person = net.start("companion", walker, stderr=subprocess.STDOUT, **printing)
+        uav = net.start("companion", [*flyer, "--emulated"], stdout=subprocess.DEVNULL, env=env, cwd=there)
+        person = net.start("companion", walker, stderr=subprocess.STDOUT, cwd=there, **printing)
         # While the game waits for them, strangers knock.
         stranger = net.start(
             "stranger",
@@ -207,6 +210,32 @@ def test_the_launcher_says_where_peers_elsewhere_join_and_what_they_run(field):
         assert command[command.index("--scenario") + 1] == f"zenoh:{GAME}"  # fetched from the ground station
         assert command[command.index("--connect") + 1] == endpoint and "--secure" in command
     assert "--vehicle" in field["commands"][1]
+    assert all("--hand-in" in command for command in field["commands"])
+
+
+def test_the_log_of_a_peer_elsewhere_comes_back_sealed_and_the_killed_ones_is_said_missing(field):
+    """The walker hands its log in at the end: the run keeps it with a seal
+    naming its proven sender, and the field computer keeps its own copy. The
+    UAV's peer, killed mid-game, hands in nothing, and the launcher says so
+    after the lease. Then a byte changed in the kept log breaks ``logs``."""
+    out = field["out"]
+    kept = out / "peers" / "attacker.jsonl"
+    assert kept.read_bytes() == (field["companion disk"] / "runs" / out.name / "peers" / "attacker.jsonl").read_bytes()
+    seal = json.loads((out / "peers" / "attacker.seal.json").read_text())
+    assert seal["sender"] == "attacker" and seal["proven"] and seal["bytes"] == kept.stat().st_size
+    events = read_events(out / "events.jsonl")
+    assert [e["peer"] for e in events if e["event"] == "handed-in"] == ["attacker"]
+    assert [e["peer"] for e in events if e["event"] == "no-log"] == ["q1"]
+    assert "q1 handed in no log within the lease" in "".join(field["said"])
+    assert "and was handed to the launcher" in field["walker said"], field["walker said"]
+    # The launcher's, the ground station's, the defender's and the attacker's handed in.
+    assert re.search(r"held\s+logs\s+4 event log", field["check"].stdout), field["check"].stdout
+    tampered = out.parent / "tampered"
+    shutil.copytree(out, tampered)
+    log = tampered / "peers" / "attacker.jsonl"
+    log.write_bytes(log.read_bytes().replace(b'"attacker"', b'"attackeR"', 1))
+    checked = subprocess.run(bearcat("check", str(tampered)), capture_output=True, text=True)
+    assert "peers/attacker.jsonl is not the log attacker handed in" in checked.stdout, checked.stdout
 
 
 def test_peers_on_another_machine_play_the_game_to_its_verdict_and_the_check_holds(field):

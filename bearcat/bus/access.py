@@ -34,6 +34,10 @@ def access_control(game: str, members: dict[str, str]) -> dict:
         ]
         if role == "ground-station":
             grants.append(("serve", _SERVER, _served(game)))
+        elif role == "launcher":
+            grants.append(("hand-in", _ASKER, [keys.every(game, "log")]))
+        else:
+            grants.append(("hand-in", _SERVER, [keys.log_query(game, name)]))
         # A publisher learns who subscribes (and so whether to send at all)
         # from the subscriptions the router passes on, which name wildcards
         # (the ground station's every fix): it hears of them all. They name

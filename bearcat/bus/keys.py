@@ -49,6 +49,7 @@ _KINDS = {
     "map": ("map",),
     "scenario": ("scenario",),
     "plan": ("plan",),
+    "log": ("log", "{}"),
 }
 
 
@@ -122,6 +123,11 @@ def scenario_query(game: str) -> str:
 def plan_query(game: str) -> str:
     """Where the ground station serves the run's fault plan, to peers started on other machines."""
     return _key(game, "plan")
+
+
+def log_query(game: str, peer: str) -> str:
+    """Where a peer started on another machine hands the launcher its log at the end."""
+    return _key(game, "log", check_name(peer, "peer"))
 
 
 def every(game: str, kind: str) -> str:

@@ -12,10 +12,11 @@ role               publishes                          reads
 ground-station     guidance, state, uav tasks,        every fix, truth, detection, control,
                    the map, scenario and fault plan   state; every peer's liveliness
 launcher           control, fault notices             everything (it records the game)
-walker NAME        fix/NAME, truth/NAME (simulated)   guidance/NAME, state, control, faults
-phone NAME         fix/NAME                           guidance/NAME, state, control, faults
+walker NAME        fix/NAME, truth/NAME (simulated),  guidance/NAME, state, control, faults
+                   log/NAME (handed in)
+phone NAME         fix/NAME, log/NAME                 guidance/NAME, state, control, faults
 uav NAME           fix/NAME, truth/NAME (emulated),   uav/NAME/task, state, control, faults,
-                   uav/NAME/detection                 every truth (its emulated camera),
+                   uav/NAME/detection, log/NAME       every truth (its emulated camera),
                                                       every peer's liveliness
 =================  =================================  =========================================
 
@@ -34,9 +35,9 @@ _ANY = {
     "launcher": frozenset({"control", "fault"}),
 }
 _OWN = {
-    "walker": frozenset({"fix", "truth"}),
-    "phone": frozenset({"fix"}),
-    "uav": frozenset({"fix", "truth", "detection"}),
+    "walker": frozenset({"fix", "truth", "log"}),
+    "phone": frozenset({"fix", "log"}),
+    "uav": frozenset({"fix", "truth", "detection", "log"}),
 }
 
 
@@ -88,4 +89,6 @@ def _own(game: str, kind: str, name: str) -> str:
         return keys.truth(game, name)
     if kind == "detection":
         return keys.detection(game, name)
+    if kind == "log":
+        return keys.log_query(game, name)
     raise BusError(f"no key of kind {kind!r} belongs to one peer")

@@ -245,7 +245,8 @@ class ZenohSession:
 
     def serve(self, key: str, reply) -> None:
         """Answer queries on ``key`` with the bytes ``reply()`` returns (the
-        ground station serves its map and scenario this way)."""
+        ground station serves its map and scenario this way, a peer started
+        elsewhere its log)."""
         self._check_open()
 
         def on_query(query: zenoh.Query) -> None:
@@ -259,12 +260,20 @@ class ZenohSession:
 
     def fetch(self, key: str, timeout: float = 2.0) -> bytes | None:
         """The first answer to a query on ``key``, None if nobody answers in time."""
+        answer = self.ask(key, timeout)
+        return None if answer is None else answer[0]
+
+    def ask(self, key: str, timeout: float = 2.0) -> tuple[bytes, str] | None:
+        """The first answer to a query on ``key`` and who gave it (proven, on a
+        sealed session; claimed, on one without credentials), None if nobody
+        answers in time."""
         self._check_open()
         for reply in self._session.get(key, timeout=timeout):
             if reply.ok is not None:
                 payload = reply.ok.payload.to_bytes()
-                if self._sender(key, payload, reply.ok.attachment, {}) is not None:
-                    return payload
+                sender = self._sender(key, payload, reply.ok.attachment, {})
+                if sender is not None:
+                    return payload, sender
         return None
 
     def links(self, timeout: float = 1.0) -> list[Link]:

@@ -165,7 +165,7 @@ def register(commands: Commands) -> None:
     arguments.add_struct_options(
         phone,
         PeerSpec,
-        names=("certs", "secure", "out", "page", "cert", "key", "token_file"),
+        names=("certs", "secure", "out", "hand_in", "page", "cert", "key", "token_file"),
         flags={"page": "--listen"},
         types={"page": _address},
     )
@@ -374,6 +374,7 @@ def run_phone(args) -> int:
         connect=tuple(args.connect),
         mode="client",
         out=args.out,
+        hand_in=bool(args.hand_in),
         certs=args.certs,
         secure=bool(args.secure),
     )

@@ -55,6 +55,7 @@ from bearcat.bus.handoff import Handoff
 from bearcat.bus.messages import Control, FaultNotice, GameState
 from bearcat.netem.shim import Shim
 from bearcat.runtime.dispatch import Dispatcher
+from bearcat.runtime.hand_in import serve_log
 from bearcat.runtime.peer_spec import PeerSpec
 from bearcat.scenarios.fault_effects import NETWORK_KINDS, apply_network, lie, skewed
 from bearcat.scenarios.faults import BY_ITSELF, GROUND, GROUND_AGENTS, LAUNCHER, Clock, Gps
@@ -394,6 +395,11 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
         mode, listen = "client", []  # a peer that listens could be reached around the router's access control
     if mode == "client" and listen is None:
         listen = []  # a client does not listen
+
+    def joining():
+        tls = credentials if spec.secure else None
+        return config(listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=tls)
+
     with (
         closing(
             EventLog(
@@ -404,9 +410,7 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
         ) as record,
         ZenohSession(
             name,
-            config(
-                listen=listen, connect=connect, mode=mode, lease_ms=lease_ms, tls=credentials if spec.secure else None
-            ),
+            joining(),
             best_effort=None
             if transport == "tcp"
             else config(
@@ -468,15 +472,21 @@ def start_peer(spec: PeerSpec, scenario, *, say=None, page=None) -> str:
                 from bearcat.agents.human.browser_bridge import page_server
 
                 page = page_server(spec.page, spec.cert, spec.key, spec.token_file)
-            return asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))
-        autopilot = cast.autopilot
-        if autopilot is None:
-            return asyncio.run(peer)
-        with asyncio.Runner() as runner:
-            # MAVSDK's commands block a thread until the vehicle answers; one
-            # that never will (its vehicle died) must not keep the peer alive.
-            runner.get_loop().set_default_executor(DaemonExecutor())
-            return runner.run(_fly(autopilot, peer))
+            reason = asyncio.run(_bridged(agents[0], page, peer, record, say or log.warning))
+        elif cast.autopilot is None:
+            reason = asyncio.run(peer)
+        else:
+            with asyncio.Runner() as runner:
+                # MAVSDK's commands block a thread until the vehicle answers; one
+                # that never will (its vehicle died) must not keep the peer alive.
+                runner.get_loop().set_default_executor(DaemonExecutor())
+                reason = runner.run(_fly(cast.autopilot, peer))
+    if spec.hand_in and record.path is not None:
+        with ZenohSession(name, joining(), credentials=credentials) as session:
+            handed = serve_log(session, scenario.name, name, record.path, scenario.lease)
+        kept = f"its log is kept at {record.path}"
+        reason += f"; {kept}, and was handed to the launcher" if handed else f"; no launcher asked for its log: {kept}"
+    return reason
 
 
 @dataclass(frozen=True)

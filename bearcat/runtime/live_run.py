@@ -46,6 +46,7 @@ from bearcat.bus.messages import Control, GameState
 from bearcat.bus.zenoh_session import ZenohSession
 from bearcat.runtime import processes, remote
 from bearcat.runtime.dispatch import FAILED
+from bearcat.runtime.hand_in import take_log
 from bearcat.runtime.live_faults import LiveFaults
 from bearcat.runtime.peer_commands import BEARCAT, VEHICLE, free_port, started_by_hand, vehicle_command
 from bearcat.runtime.peer_spec import PeerSpec, flags, write_spec
@@ -142,6 +143,7 @@ class LiveRun:
         self._budget = SenderBudget()
         self._final: dict = {}
         self._alive: set[str] = set()
+        self._ever_alive: set[str] = set()
         self._lock = threading.Lock()
         session.on_refused = self._forged
         session.subscribe(keys.game_wide(self.game), self._seen)
@@ -197,6 +199,8 @@ class LiveRun:
     def _liveliness(self, key, up) -> None:
         with self._lock:
             (self._alive.add if up else self._alive.discard)(key)
+            if up:
+                self._ever_alive.add(key)
             self.record.note(time.time(), "alive" if up else "gone", key=key)
 
     def _ended(self) -> bool:
@@ -296,10 +300,12 @@ class LiveRun:
             spec = self.spec(role, name, at, **({"vehicle": VEHICLE} if role == "uav" else {}))
             # Started by hand on the host's own network; it applies the plan's faults on itself (``PeerRun``).
             spec = msgspec.structs.replace(spec, network="shim")
-            if self.elsewhere:  # the scenario, map and plan come from the ground station
-                spec = msgspec.structs.replace(spec, scenario=f"zenoh:{self.game}", out=None, faults=None)
+            if self.elsewhere:  # the scenario, map and plan come from the ground station; the log comes back
+                kept = f"runs/{s.out.name}"  # on that machine
+                spec = msgspec.structs.replace(spec, scenario=f"zenoh:{self.game}", out=kept, faults=None, hand_in=True)
             bridge = [*program, "phone", "--connect", at, "--game", self.game, "--id", name, "--certs", str(self.certs)]
             bridge += [] if spec.out is None else ["--out", spec.out]
+            bridge += ["--hand-in"] if spec.hand_in else []
             bridge += ["--secure"] if s.secure else []
             chosen = bridge if name in s.phones else [*program, "peer", *flags(spec)]
             s.say(
@@ -324,9 +330,9 @@ class LiveRun:
         while True:
             with self._lock:
                 missing = sorted(self.expected - self._alive)
-            if self.elsewhere and time.monotonic() >= look:
+            if (self.elsewhere or self.by_hand) and time.monotonic() >= look:
                 look = time.monotonic() + LOOK
-                for arrival in remote.arrivals(self.session.links(), arrived):
+                for arrival in remote.arrivals(self.session.links(), arrived, frozenset(self.by_hand)):
                     s.say(f"{self.game}: {arrival.describe()}")
                     with self._lock:
                         self.record.note(time.time(), "joined", **vars(arrival))
@@ -451,6 +457,7 @@ class LiveRun:
         if self.injector is not None:
             self.injector.close()
         codes = self._stop_all(reason)
+        self._take_logs()
         state = self._final.get("state")
         outcome = LiveOutcome(
             scenario=self.game,
@@ -468,6 +475,23 @@ class LiveRun:
         self.record.note(time.time(), "outcome", **vars(outcome))
         _keep(s.out, outcome, self.record, s.say)
         return outcome
+
+    def _take_logs(self) -> None:
+        """Keep the log each peer started elsewhere hands in, with its seal;
+        say where one that hands in none keeps it."""
+        s = self.settings
+        if not self.elsewhere:
+            return
+        came = {key.rsplit("/", 1)[-1] for key in self._ever_alive}
+        for name in sorted(self.by_hand & came):
+            seal = take_log(self.session, self.game, name, s.out, s.scenario.lease)
+            with self._lock:
+                if seal is None:
+                    self.record.note(time.time(), "no-log", peer=name)
+                else:
+                    self.record.note(time.time(), "handed-in", **msgspec.structs.asdict(seal))
+            if seal is None:
+                s.say(f"{self.game}: {name} handed in no log within the lease; it keeps it on its own machine")
 
     def _stop_all(self, reason: str | None) -> dict[str, int | None]:
         """The stop command, then SIGTERM, then SIGKILL, each waited on; each peer's exit code."""

@@ -84,6 +84,13 @@ class PeerSpec(msgspec.Struct, frozen=True, forbid_unknown_fields=True, kw_only=
         bool, _said("join a guarded bus: a client of the router over tls/ only, presenting ID.pem from --certs")
     ] = False
     faults: Annotated[str | None, _said("the run's fault plan: apply the faults the launcher announces", "FILE")] = None
+    hand_in: Annotated[
+        bool,
+        _said(
+            "at the end, hand this peer's log in --out DIR to the launcher over the bus (a peer on another "
+            "machine), keeping its own copy"
+        ),
+    ] = False
     resume: Annotated[
         bool, _said("take up the game where this peer's log in --out DIR left it (a peer restarted mid-game)")
     ] = False

@@ -127,16 +127,18 @@ class Arrival:
         return f"{who} joined from {self.address}" + (f" on {self.interface}" if self.interface else "")
 
 
-def arrivals(links, seen: set[Arrival]) -> list[Arrival]:
+def arrivals(links, seen: set[Arrival], by_hand: frozenset[str] = frozenset()) -> list[Arrival]:
     """The arrivals among the router's ``links`` (``ZenohSession.links``)
-    from other machines that are not in ``seen``, which takes them in."""
+    that are not in ``seen``, which takes them in: those from other
+    machines, and those over the loopback whose certificate names one of
+    the peers a person starts here (``by_hand``)."""
     new = []
     for link in links:
         try:
             remote = parse_endpoint(link.remote)
         except BusError:
             continue
-        if is_loopback(remote.host):
+        if is_loopback(remote.host) and link.certificate not in by_hand:
             continue
         arrival = Arrival(link.certificate, remote.host, link.interfaces[0] if link.interfaces else None)
         if arrival not in seen:

@@ -8,7 +8,8 @@ broken, or does not apply to the run (``None``), with one line of evidence:
 - ``logs``: every event log parses to its last line, the outcome is there
   (or the peers saw their launcher die, and none took the run up: then
   ``verdict`` says the run ended without one, and when),
-  and every peer's log says how the peer ended;
+  and every peer's log says how the peer ended; a log a peer on another
+  machine handed in matches the SHA-256 of its seal;
 - ``reliable``: every reliable message (state, control, UAV tasks) reached
   each peer that listens to its key, unless a fault had cut that peer off,
   or it was sent before the peer first heard anything or after it stopped;
@@ -59,6 +60,7 @@ import shapely
 from bearcat.bus import keys
 from bearcat.bus.errors import BusError
 from bearcat.runtime import processes
+from bearcat.runtime.hand_in import broken_seal
 from bearcat.runtime.run_directory import SCENARIO
 from bearcat.scenarios.faults import GROUND, GROUND_AGENTS, LAUNCHER
 
@@ -207,6 +209,10 @@ def _logs(run: Run) -> Finding:
             problems.append(f"peers/{log.name} does not say how the peer ended (its last line: {last!r})")
         elif any(line.startswith("Traceback") for line in lines):
             problems.append(f"peers/{log.name} holds a traceback")
+    for seal in sorted((run.directory / "peers").glob("*.seal.json")):
+        broken = broken_seal(run.directory, seal.name.removesuffix(".seal.json"))
+        if broken is not None:
+            problems.append(broken)
     if problems:
         return Finding("logs", False, "; ".join(problems))
     logs = 1 + len(run.peer_logs)
