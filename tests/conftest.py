@@ -23,3 +23,22 @@ def private_cache_dir(tmp_path_factory):
     with pytest.MonkeyPatch.context() as patch:
         patch.setenv("BEARCAT_CACHE_DIR", str(path))
         yield path
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_collection_modifyitems(config, items):
+    """Refuse a parallel session whose groups would silently run apart.
+
+    The tests of one ``xdist_group`` share a module's game, or the host's
+    links, and must run in one worker; pytest-xdist's ``--dist loadgroup``
+    marks them by suffixing their node ids in each worker, which some
+    pairings of pytest and pytest-xdist undo (pytest-dev/pytest-xdist#1386).
+    """
+    if not getattr(config.option, "loadgroup", False):
+        return
+    lost = [item.nodeid for item in items if item.get_closest_marker("xdist_group") and "@" not in item.nodeid]
+    if lost:
+        raise pytest.UsageError(
+            f"--dist loadgroup does not group {lost[0]} (and {len(lost) - 1} more) with this pytest "
+            f"{pytest.__version__} and pytest-xdist: install the versions pyproject.toml's test extra names"
+        )

@@ -557,10 +557,13 @@ def _cut_off(run: Run, t: float, *peers: str) -> bool:
 
 
 def _absences(run: Run):
-    """Each death no fault caused, with when it happened and when its peer started again (inf: never)."""
+    """Each death no fault caused, with when it happened and when its peer
+    was back on the bus (inf: never): a peer started again subscribes
+    before its token comes, and what was sent before cannot reach it."""
     for death in run.deaths:
-        back = next((e["t"] for e in run.restarts if e["peer"] == death["peer"] and e["t"] >= death["t"]), math.inf)
-        yield death, death["t"], back
+        again = next((e["t"] for e in run.restarts if e["peer"] == death["peer"] and e["t"] >= death["t"]), None)
+        back = None if again is None else _first(run, death["peer"], "alive", again)
+        yield death, death["t"], math.inf if back is None else back
 
 
 def _lasted(run: Run, fault: dict) -> float | None:
