@@ -40,7 +40,9 @@ def kill_mid_game(launcher: subprocess.Popen, out, victim: str, moment: float) -
     else:
         pytest.fail(f"the launcher ended before the game started (exit {launcher.wait()})")
     time.sleep(moment)
-    (peer,) = [p for p in processes.recorded(out) or [] if p.name == victim and processes.running(p)]
+    running = [p for p in processes.recorded(out) or [] if p.name == victim and processes.running(p)]
+    assert len(running) == 1, f"{victim} has {len(running)} running processes: {running}"
+    peer = running[0]
     killed = time.time()
     os.kill(peer.pid, signal.SIGKILL)
     return killed
@@ -57,7 +59,9 @@ def assert_restarted_and_judged(launcher, out, victim: str, killed: float) -> No
     outcome = json.loads((out / "outcome.json").read_text())
     assert outcome["ended"] and outcome["winner"] is not None, (outcome["reason"], output)
     events = [json.loads(line) for line in (out / "events.jsonl").read_text().splitlines()]
-    (death,) = [e for e in events if e["event"] == "died"]
+    deaths = [e for e in events if e["event"] == "died"]
+    assert len(deaths) == 1, (deaths, output)
+    death = deaths[0]
     assert death["peer"] == victim and death["code"] == -signal.SIGKILL and death["restart"]
     assert 0.0 <= death["t"] - killed < 1.0  # seen at once: the launcher waits on its child
     findings = judged(out)
@@ -76,7 +80,8 @@ def test_a_ground_station_killed_at_a_random_moment_is_restarted_and_every_fake_
         moment = random.Random(game).uniform(0.5, 7.0)
         folder = tmp_path / f"game-{game}"
         folder.mkdir()
-        path = write_scenario(folder, time_limit=20.0)
+        # A player waits a lease for a ground station gone: longer than a restart can take on a loaded machine.
+        path = write_scenario(folder, time_limit=20.0, lease=30.0)
         launcher = start_launcher(path, folder / "run", "--seed", str(game))
         try:
             killed = kill_mid_game(launcher, folder / "run", "gs", moment)
