@@ -13,6 +13,7 @@ import os
 import shutil
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import time
@@ -37,6 +38,7 @@ description = "a fixed delay and a known loss, to measure"
 delay = 0.1
 loss = 0.05
 """
+SO_TIMESTAMPNS = 35  # Linux's, which Python's socket module does not name (its control message has the same number)
 SENDER = """
 import socket, struct, sys, time
 host, port, count = sys.argv[1], int(sys.argv[2]), int(sys.argv[3])
@@ -82,6 +84,8 @@ def test_a_link_delays_and_loses_packets_as_its_profile_says(tmp_path):
         added = network.host_side
         receiver.bind((network.router, 0))
         receiver.settimeout(2.0)
+        # Each datagram's arrival as the kernel stamped it, not as this (perhaps busy) process read it.
+        receiver.setsockopt(socket.SOL_SOCKET, SO_TIMESTAMPNS, 1)
         port = receiver.getsockname()[1]
         with open(tmp_path / "sender.log", "w") as log:
             sender = network.spawn(
@@ -90,8 +94,9 @@ def test_a_link_delays_and_loses_packets_as_its_profile_says(tmp_path):
         delays = []
         try:
             while True:
-                payload = receiver.recv(64)
-                delays.append(time.time() - np.frombuffer(payload[4:12], dtype=">f8")[0])
+                payload, ancillary, _, _ = receiver.recvmsg(64, socket.CMSG_SPACE(16))
+                arrived = next(struct.unpack("qq", data[:16]) for _, kind, data in ancillary if kind == SO_TIMESTAMPNS)
+                delays.append(arrived[0] + arrived[1] * 1e-9 - np.frombuffer(payload[4:12], dtype=">f8")[0])
         except TimeoutError:
             pass
         assert sender.wait(timeout=30) == 0
