@@ -6,6 +6,8 @@ set by the scenario and refused where it cannot serve; the cache answers
 exactly as a ground station started on the game's own sets; the solve
 behind the game stores them and, stopped, leaves no process running."""
 
+import os
+
 import pytest
 
 from bearcat.agents.ground_station.ctf_cache import cached, load_or_solve
@@ -17,6 +19,7 @@ from bearcat.scenarios.cast import build_cast
 from bearcat.scenarios.schema import ScenarioError, parse_scenario
 from bearcat.solvers.ctf.queries import CtfQueries
 from tests.support.answers import answering
+from tests.support.live_runs import wait_for
 from tests.test_guidance import fixes_at
 
 GAME = """
@@ -124,6 +127,8 @@ def test_the_solve_behind_a_game_stores_its_sets_and_a_stopped_one_leaves_nothin
 
     larger = ground(scenario(grid=45, provisional=21, radius=2.5)).awaited
     stopped = SolveBehind(larger)
+    # Its first act: the lowest priority of an ordinary process, so the game's peers come first.
+    assert wait_for(lambda: os.getpriority(os.PRIO_PROCESS, stopped.pid) == 19, 60), "the solve kept its priority"
     stopped.stop()
     assert stopped.done and not stopped.solved
     assert cached(larger.game, larger.stages) is None

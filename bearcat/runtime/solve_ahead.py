@@ -8,10 +8,11 @@ anything else runs. The caller draws the progress (the CLI's bars).
 
 A live run need not wait for a large grid: its ground station may start
 on provisional sets, solved in seconds, while ``SolveBehind`` solves the
-game's own sets into the cache in a child process that runs only on a
-processor nothing else wants (Linux's SCHED_IDLE), so the game's peers
-keep the processor they need. The ground station takes those sets up once
-they are there.
+game's own sets into the cache in a child process at the lowest priority
+an ordinary process has (nice 19), so the game's peers keep the processor
+they need, and yet the solve moves on a laptop kept busy by other work,
+where one that ran only on idle processors would wait for that work to
+end. The ground station takes those sets up once they are there.
 """
 
 from __future__ import annotations
@@ -47,12 +48,13 @@ def solve_ahead(scenario, netem: str, *, provisional: bool = False, progress: Pr
 
 
 WAITED = 4
+LOWEST = 19  # nice: the lowest priority of an ordinary process
 """Where in the shared array the launcher says it waits for the solve (1)."""
 
 
 class SolveBehind:
     """The ``awaited`` sets (``cast.AwaitedSets``) solved into the cache by
-    a child process on otherwise idle processors, from the moment it is made.
+    a child process at the lowest priority, from the moment it is made.
     The child dies with this process. ``finish`` waits for it with a
     progress bar; ``stop`` ends it, leaving the sets for another run."""
 
@@ -71,6 +73,11 @@ class SolveBehind:
             daemon=True,
         )
         self._process.start()
+
+    @property
+    def pid(self) -> int | None:
+        """The child's process number."""
+        return self._process.pid
 
     @property
     def done(self) -> bool:
@@ -112,7 +119,7 @@ class SolveBehind:
 
 
 def compile_kernels_behind():
-    """A child process, on otherwise idle processors, that fills numba's
+    """A child process, at the lowest priority, that fills numba's
     cache with the guidance's query kernels (``ctf.queries.compile_kernels``)
     and the walkers' look-ahead (``descent.compile_kernels``) while the
     launcher compiles and runs the solver on one processor. So a ground
@@ -127,7 +134,7 @@ def compile_kernels_behind():
 
 
 def _compile_kernels() -> None:
-    _idle()
+    _lowest()
     from bearcat.solvers.ctf import queries as ctf_queries
     from bearcat.solvers.marching import descent
 
@@ -135,13 +142,10 @@ def _compile_kernels() -> None:
     descent.compile_kernels()
 
 
-def _idle() -> None:
-    """Make this child run only on a processor nothing else wants (its
-    threads inherit the policy), leave Ctrl-C to the launcher, and die with it."""
-    if hasattr(os, "SCHED_IDLE"):
-        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
-    else:  # not Linux: the lowest priority there is
-        os.nice(19)
+def _lowest() -> None:
+    """Give this child the lowest priority (the threads it starts inherit
+    it), leave Ctrl-C to the launcher, and die with it."""
+    os.setpriority(os.PRIO_PROCESS, 0, LOWEST)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the launcher's to handle
     from bearcat.netem.kernel.commands import die_with_parent
 
@@ -149,30 +153,30 @@ def _idle() -> None:
 
 
 def _promote(pid: int | None = None) -> None:
-    """Give every thread of process ``pid`` (None: this one) an ordinary
-    share of the processors: once the game is over somebody waits for the
-    solve, and on a machine kept busy by other work an idle-only solve would
-    not move. The launcher promotes the child when it starts to wait; the
-    child, having made itself idle, promotes itself if the launcher already
-    waits, in case it did so after the launcher's promotion."""
-    if not hasattr(os, "SCHED_IDLE"):
-        return
+    """Give every thread of process ``pid`` (None: this one) the launcher's
+    own priority: once the game is over somebody waits for the solve. The
+    launcher promotes the child when it starts to wait; the child, having
+    lowered itself, promotes itself if the launcher already waits, in case
+    it did so after the launcher's promotion. Raising a priority takes
+    privileges (root, or a nice limit); without them the solve goes on at
+    the lowest one."""
+    ordinary = os.getpriority(os.PRIO_PROCESS, os.getppid() if pid is None else 0)
     try:
         threads = os.listdir(f"/proc/{pid or 'self'}/task")
     except OSError:
         return  # gone, or no /proc
     for tid in threads:
         try:
-            os.sched_setscheduler(int(tid), os.SCHED_OTHER, os.sched_param(0))
+            os.setpriority(os.PRIO_PROCESS, int(tid), ordinary)  # on Linux, one thread's
         except OSError:
-            pass  # a thread that ended meanwhile, or a system that does not let us: it stays idle-only
+            pass  # a thread that ended meanwhile, or no privilege: it stays at the lowest priority
 
 
 def _solve_behind(pickled_game: bytes, stages: str, where) -> None:
     """The child's work: solve the game's ``stages`` into the cache, reporting
-    in ``where``, on idle processors only, so a peer never waits for it."""
-    _idle()
-    if where[WAITED]:  # the launcher started waiting, and promoting us, before we made ourselves idle
+    in ``where``, at the lowest priority, so a peer never waits for it."""
+    _lowest()
+    if where[WAITED]:  # the launcher started waiting, and promoting us, before we lowered ourselves
         _promote()
     from bearcat.agents.ground_station.ctf_cache import load_or_solve
     from bearcat.solvers.ctf.sets import STAGES
