@@ -627,9 +627,10 @@ def test_a_run_whose_sets_are_not_cached_starts_on_provisional_ones_and_takes_it
     """The game starts on the 21-point sets while the 25-point ones solve
     behind it (held here until the game is on, so the order is certain);
     the ground station takes those up mid-game, guides from them, and they
-    stay in the cache. The solve runs on idle processors only, so however
-    long it takes on a loaded machine, the game goes on until the test has
-    seen guidance from the sets taken up, then ends it with Ctrl-C."""
+    stay in the cache. The solve gives way to every other process (nice
+    19), so however long it takes on a loaded machine, the game goes on
+    until the test has seen guidance from the sets taken up, then ends it
+    with Ctrl-C."""
     from bearcat.agents.ground_station.ctf_cache import cached, turn
     from bearcat.scenarios.cast import awaited_sets
 
