@@ -288,13 +288,15 @@ def test_ctrl_c_stops_every_peer(tmp_path):
     launcher, out, _path = start_run(tmp_path, time_limit=60.0, netem="ideal")
     try:
         assert wait_for(lambda: game_started(out), 120), "the game never started"
+        sent = time.time()
         launcher.send_signal(signal.SIGINT)
-        launcher.communicate(timeout=60)
+        output, _ = launcher.communicate(timeout=60)
     finally:
         if launcher.poll() is None:
             launcher.kill()
     outcome = json.loads((out / "outcome.json").read_text())
-    assert "interrupted" in outcome["reason"] or "stopped" in outcome["reason"], outcome
+    heard = [e["t"] - sent for e in read_events(out / "events.jsonl") if e["event"] == "interrupted"]
+    assert "interrupted" in outcome["reason"] or "stopped" in outcome["reason"], (outcome, heard, output)
     assert wait_for(lambda: peers_of(out) == [], 10)
 
 

@@ -1,7 +1,9 @@
 """``bearcat phone`` by hand, as on a second laptop: it fetches the game's
 map from a ground station started by hand, serves the page over HTTPS to
 whoever has the link's token, and joins the game, sealed with the player's
-certificate, once the page has sent a fix."""
+certificate, once the page has sent a fix. Stopped, it hands its log to
+whoever runs the game (``--hand-in``), as a phone on another machine does
+at the end of a run."""
 
 import asyncio
 import json
@@ -16,6 +18,7 @@ from bearcat.agents.ground_station.event_log import read_events
 from bearcat.bus import keys
 from bearcat.bus.zenoh_session import ZenohSession, config
 from bearcat.runtime.credentials import add_to
+from bearcat.runtime.hand_in import take_log
 from bearcat.runtime.peer_commands import free_port
 from bearcat.scenarios.schema import load_scenario
 from tests.support.live_runs import wait_for
@@ -64,7 +67,7 @@ def test_bearcat_phone_by_hand_serves_its_page_and_joins_on_the_first_fix(tmp_pa
         )
         phone = subprocess.Popen(
             [sys.executable, "-m", "bearcat", "phone", "--game", GAME, "--id", "attacker", *common]
-            + ["--listen", f"127.0.0.1:{page_port}", "--token-file", str(tmp_path / "token")],
+            + ["--listen", f"127.0.0.1:{page_port}", "--token-file", str(tmp_path / "token"), "--hand-in"],
             stdout=subprocess.PIPE,
             stderr=subprocess.STDOUT,
             text=True,
@@ -88,6 +91,10 @@ def test_bearcat_phone_by_hand_serves_its_page_and_joins_on_the_first_fix(tmp_pa
             # It joins on the fix its page sent, which its view showed already: at once, however loaded the host.
             assert wait_for(lambda: router.alive(token, timeout=0.5), 60), "the phone never joined"
             phone.send_signal(signal.SIGINT)
+            laptop = tmp_path / "laptop"
+            (laptop / "peers").mkdir(parents=True)
+            # Its log is served from the moment its game has stopped, for a lease.
+            seal = take_log(router, GAME, "attacker", laptop, lease=60.0)
             said, _ = phone.communicate(timeout=30)
         finally:
             for p in (phone, gs):
@@ -99,6 +106,10 @@ def test_bearcat_phone_by_hand_serves_its_page_and_joins_on_the_first_fix(tmp_pa
     assert found["view"]["agent"] == "attacker" and found["view"]["fix"] is None
     assert found["later"]["fix"]["accuracy"] == 5.0 and found["later"]["dropped"] == 1
     assert phone.returncode == 0 and "peer attacker: interrupted" in said, said
+    assert "and was handed to the launcher" in said, said
+    kept = (out / "peers" / "attacker.jsonl").read_bytes()
+    assert seal is not None and (laptop / "peers" / "attacker.jsonl").read_bytes() == kept
+    assert seal.bytes == len(kept) and not seal.proven  # the router here holds no certificate
     received = [e for e in read_events(out / "peers" / "gs.jsonl") if e["event"] == "received"]
     assert any(e["key"] == keys.fix(GAME, "attacker") and e["sender"] == "attacker" for e in received)
     refused = [e for e in read_events(out / "peers" / "attacker.jsonl") if e["event"] == "refused"]

@@ -130,6 +130,16 @@ def test_who_joined_from_where_is_said_once_per_name_and_address():
     assert remote.arrivals(again, seen) == []
 
 
+def test_a_peer_a_person_starts_on_this_machine_is_said_to_join_by_its_certificates_name():
+    links = [
+        Link("tls/127.0.0.1:40113", ("lo",), "gs"),  # the launcher's own
+        Link("tls/127.0.0.1:40114", ("lo",), "defender"),  # --joins defender
+        Link("tcp/127.0.0.1:40115", ("lo",), None),  # unsecured: nobody can say it is the defender
+    ]
+    found = remote.arrivals(links, set(), frozenset({"defender"}))
+    assert [a.describe() for a in found] == ["defender joined from 127.0.0.1 on lo"]
+
+
 def test_certs_init_host_puts_an_address_in_the_routers_certificate_even_once_issued(tmp_path):
     made = _bearcat("certs", "init", tmp_path / "field", "--scenario", "fake-out")
     assert made.returncode == 0, made.stderr

@@ -160,6 +160,8 @@ class LiveRun:
                 reason = self.supervise()
         except KeyboardInterrupt:
             reason = "interrupted"
+            with self._lock:
+                self.record.note(time.time(), "interrupted")  # when Ctrl-C was heard, which the outcome follows
         finally:
             outcome = self.stop(reason)
         return outcome
