@@ -18,18 +18,27 @@ steps are methods that can be followed, and tested, one at a time:
 Everything the launcher's session hears of the game is recorded as it
 comes, from the moment the run exists: what a sender sent (within its
 budget), what was refused and why, and whose tokens came and went.
+
+Ctrl-C and SIGTERM, while a run plays, only set a flag that the waiting
+steps look at between their polls. An exception raised by a signal
+wherever the launcher happens to be (Python's KeyboardInterrupt) can land
+inside a lock's bookkeeping, a thread's start or a process's spawn and
+leave them half done; a flag ends the run at a known point, with every
+step after it free to stop the peers and keep the outcome.
 """
 
 from __future__ import annotations
 
 import json
 import logging
+import signal
 import socket
 import subprocess
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -145,6 +154,8 @@ class LiveRun:
         self._alive: set[str] = set()
         self._ever_alive: set[str] = set()
         self._lock = threading.Lock()
+        self._interrupted = threading.Event()
+        self._heard: tuple[str, float] | None = None  # the signal that ended the run, and when
         session.on_refused = self._forged
         session.subscribe(keys.game_wide(self.game), self._seen)
         session.subscribe_liveliness(keys.every(self.game, "alive"), self._liveliness)
@@ -152,19 +163,51 @@ class LiveRun:
     def play(self) -> LiveOutcome:
         """Every step in turn; the peers are stopped and the outcome kept however the run ends."""
         reason = None
-        try:
-            self.start()
-            reason = self.await_up()
-            if reason is None:
-                self.begin()
-                reason = self.supervise()
-        except KeyboardInterrupt:
-            reason = "interrupted"
-            with self._lock:
-                self.record.note(time.time(), "interrupted")  # when Ctrl-C was heard, which the outcome follows
-        finally:
-            outcome = self.stop(reason)
+        with self._signals_end_the_run():
+            try:
+                self.start()
+                reason = self._unless_interrupted(self.await_up)
+                if reason is None:
+                    self.begin()
+                    reason = self._unless_interrupted(self.supervise)
+            finally:
+                outcome = self.stop(reason)
         return outcome
+
+    @contextmanager
+    def _signals_end_the_run(self) -> Iterator[None]:
+        """Ctrl-C and SIGTERM set the run's flag while it plays (in the main
+        thread only, where Python lets a handler be set)."""
+
+        def heard(number, _frame) -> None:
+            if self._heard is None:
+                self._heard = (signal.Signals(number).name, time.time())
+            self._interrupted.set()
+
+        try:
+            kept = {number: signal.signal(number, heard) for number in (signal.SIGINT, signal.SIGTERM)}
+        except ValueError:  # not the main thread
+            kept = {}
+        try:
+            yield
+        finally:
+            for number, handler in kept.items():
+                signal.signal(number, handler)
+
+    def _unless_interrupted(self, step: Callable[[], str | None]) -> str | None:
+        """Why ``step`` ended the run, or "interrupted" if a signal did (noted
+        with the signal and the moment it was heard)."""
+        reason = step()
+        if self._heard is None:
+            return reason
+        name, at = self._heard
+        with self._lock:
+            self.record.note(at, "interrupted", signal=name)
+        return "interrupted"
+
+    def _pause(self, seconds: float) -> bool:
+        """Wait ``seconds``, or less if a signal comes; whether one came."""
+        return self._interrupted.wait(seconds)
 
     # What the launcher's session hears, from the moment the run exists.
 
@@ -345,7 +388,8 @@ class LiveRun:
                 return f"peer {dead[0]} exited with code {self.children[dead[0]].returncode} before the start"
             if time.monotonic() > deadline:
                 return f"peers not up after {s.startup:g} s: {', '.join(k.rsplit('/', 1)[-1] for k in missing)}"
-            time.sleep(0.05)
+            if self._pause(0.05):
+                return None
 
     def begin(self) -> None:
         """Arm the fault plan and send the start command; a run taken up again
@@ -421,7 +465,8 @@ class LiveRun:
                     return f"peer {dead[0]} exited with code {self.children[dead[0]].returncode}{_why(logs, dead[0])}"
             if time.monotonic() - self.started_at > limit:
                 return f"no result within {limit:g} s"
-            time.sleep(0.05)
+            if self._pause(0.05):
+                return None
 
     def _mourn(self, downed: dict[str, tuple[str, bool]]) -> str | None:
         """Record each death no fault caused, and start the peer again when
