@@ -48,8 +48,9 @@ def solve_ahead(scenario, netem: str, *, provisional: bool = False, progress: Pr
 
 
 WAITED = 4
-LOWEST = 19  # nice: the lowest priority of an ordinary process
 """Where in the shared array the launcher says it waits for the solve (1)."""
+
+LOWEST = 19  # nice: the lowest priority of an ordinary process
 
 
 class SolveBehind:
