@@ -502,6 +502,24 @@ def test_the_solver_fingerprint_follows_the_code_not_its_comments_or_docstrings(
     assert (before == after) is kept
 
 
+def test_the_code_is_parsed_once_per_change_and_a_damaged_note_of_it_is_parsed_again(tmp_path, monkeypatch):
+    """Every process that opens the cache (each peer, each study worker)
+    needs the fingerprint, and parsing the solvers takes most of a second:
+    the result is kept under the hash of the files as written."""
+    parsed = []
+    code = ctf_cache._code
+    monkeypatch.setattr(ctf_cache, "_code", lambda path: parsed.append(path) or code(path))
+    monkeypatch.setenv("BEARCAT_CACHE_DIR", str(tmp_path / "cache"))
+    first = _fingerprint_of(tmp_path / "a", SOLVER)
+    assert len(parsed) == 1
+    assert _fingerprint_of(tmp_path / "b", SOLVER) == first and len(parsed) == 1
+    for note in (tmp_path / "cache" / "code").iterdir():
+        note.write_text("not a digest")
+    assert _fingerprint_of(tmp_path / "c", SOLVER) == first and len(parsed) == 2
+    assert _fingerprint_of(tmp_path / "d", SOLVER.replace("explicit Euler", "forward Euler")) == first
+    assert len(parsed) == 3
+
+
 def test_the_flag_return_stage_is_shared_through_the_cache(game, tmp_path):
     both = load_or_solve(game, "both", root=tmp_path)
     alone = load_or_solve(game, "return", root=tmp_path)

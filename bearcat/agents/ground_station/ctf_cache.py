@@ -288,12 +288,33 @@ def _fingerprint(packages: tuple[Path, ...]) -> str:
         version = metadata.version("bearcat")
     except metadata.PackageNotFoundError:
         version = "unknown"
+    paths = [(package, path) for package in packages for path in sorted(package.rglob("*.py"))]
+    as_written = hashlib.sha256()
+    for package, path in paths:
+        as_written.update(path.relative_to(package.parent).as_posix().encode() + b"\0" + path.read_bytes() + b"\0")
+    source = _without_text(paths, as_written.hexdigest())
+    return f"{version} numpy {np.__version__} numba {numba.__version__} source {source[:16]}"
+
+
+def _without_text(paths: list[tuple[Path, Path]], as_written: str) -> str:
+    """The hash of the code of ``paths`` without comments and docstrings.
+    Parsing every module takes most of a second, which every process that
+    opens the cache (each peer, each study worker) would pay; the hash of
+    the files as written takes milliseconds, so the answer is kept under it
+    in the cache directory, and parsing happens once per change of the code."""
+    kept = cache_root() / "code" / as_written
+    with contextlib.suppress(OSError, UnicodeDecodeError):
+        known = kept.read_text()
+        if len(known) == 64 and all(c in "0123456789abcdef" for c in known):
+            return known
     source = hashlib.sha256()
-    for package in packages:
-        for path in sorted(package.rglob("*.py")):
-            code = _code(path)
-            source.update(path.relative_to(package.parent).as_posix().encode() + b"\0" + code.encode() + b"\0")
-    return f"{version} numpy {np.__version__} numba {numba.__version__} source {source.hexdigest()[:16]}"
+    for package, path in paths:
+        source.update(path.relative_to(package.parent).as_posix().encode() + b"\0" + _code(path).encode() + b"\0")
+    digest = source.hexdigest()
+    with contextlib.suppress(OSError):  # a cache directory that refuses writes only costs the parse again
+        kept.parent.mkdir(parents=True, exist_ok=True)
+        write_atomically(kept, lambda f: f.write(digest.encode()))
+    return digest
 
 
 def _code(path: Path) -> str:

@@ -26,7 +26,6 @@ from dataclasses import dataclass, field
 import numpy as np
 import shapely
 import shapely.ops
-from scipy.interpolate import RegularGridInterpolator
 
 from bearcat.agents.ground_station.tasking import NEEDS_SETS, SearchView, TaskingPolicy, Uav, point_problem
 from bearcat.agents.guard import Guard, PluginFault
@@ -256,6 +255,8 @@ class UavTasker:
 
     def _resampled(self, values: np.ndarray) -> np.ndarray:
         """A field on the solver's player grid, on the search grid."""
+        from scipy.interpolate import RegularGridInterpolator  # half a second to import, for UAV games only
+
         assert self.ctf is not None  # the field came from its sets
         sample = RegularGridInterpolator(self.ctf.geometry.grid.axes(), values, bounds_error=False, fill_value=-1.0)
         return sample(self._nodes)

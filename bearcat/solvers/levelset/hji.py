@@ -65,7 +65,6 @@ from typing import TYPE_CHECKING
 
 import numba
 import numpy as np
-from scipy import ndimage
 
 from bearcat.solvers.errors import InputError, fraction, non_negative, positive
 from bearcat.solvers.grid import Grid
@@ -557,6 +556,8 @@ class _NarrowBand:
 
 
 def _dilated(rows: np.ndarray, radius: int) -> np.ndarray:
+    from scipy import ndimage  # a third of a second to import, which only a local solve needs
+
     for axis in range(rows.ndim):
         rows = ndimage.maximum_filter1d(rows, 2 * radius + 1, axis=axis, mode="constant")
     return rows
