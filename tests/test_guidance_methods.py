@@ -7,6 +7,7 @@ example package's ``intercept`` among them."""
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import pytest
@@ -241,8 +242,13 @@ def test_the_examples_intercept_steers_the_defender_to_the_cut_off_point_in_simu
     assert findings["verdict"] and findings["plugins"] and findings["leftovers"], findings
     assert any(m["note"].startswith("cut off in ") for m in guidance_to(tmp_path / "live", "defender"))
     faults = [e for e in read_events(tmp_path / "live" / "peers" / "gs.jsonl") if e["event"] == "plugin"]
-    assert [(e["agent"], e["fault"]) for e in faults] == [("attacker", "raised"), ("attacker", "overran")]
-    assert faults[1]["detail"].endswith("past its budget of 25 ms")
+    # The tenth call raises and the twentieth sleeps 200 ms, eight budgets. The budget is held on the wall
+    # clock, so on a busy machine an ordinary call may overrun it too; the guard records that as well.
+    assert {e["agent"] for e in faults} == {"attacker"}
+    assert [e["fault"] for e in faults if e["fault"] != "overran"] == ["raised"]
+    details = [e["detail"] for e in faults if e["fault"] == "overran"]
+    overruns = [re.fullmatch(r"took (\d+) ms, past its budget of 25 ms", detail) for detail in details]
+    assert all(overruns) and any(int(m[1]) >= 200 for m in overruns if m), details
     log = (tmp_path / "live" / "peers" / "gs.log").read_text()
     assert "attacker: plug-in mine.py:Slow raised RuntimeError: tenth (1 time so far)" in log
     assert "attacker: plug-in mine.py:Slow took" in log
