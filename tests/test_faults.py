@@ -205,6 +205,19 @@ def test_a_stopped_ground_station_ends_the_run_naming_the_fault(tmp_path):
     held(findings)
 
 
+def test_a_plugins_fault_is_not_blamed_for_a_verdict_a_planned_fault_kept_from_the_game(tmp_path):
+    """The plan stopped the ground station, so the run has no verdict and says why; whether a plug-in's
+    overrun just before kept the game from one cannot be judged, and is not held against it."""
+    play(tmp_path, [{"kind": "stop", "target": "gs", "at": 2.0}])
+    overran = {"event": "plugin", "t": 1.9, "at": 1.9, "peer": "gs", "agent": "attacker", "plugin": "none"}
+    overran |= {"fault": "overran", "detail": "took 819 ms, past its budget of 25 ms"}
+    with (tmp_path / "run" / "events.jsonl").open("a") as f:
+        f.write(json.dumps(overran) + "\n")
+    findings = {f.name: f for f in check_run(tmp_path / "run")}
+    assert findings["verdict"].held and findings["plugins"].held is None
+    assert "because the ground station is gone: fault[0] (stop gs" in findings["plugins"].evidence
+
+
 # ---------------------------------------------------------------- the network
 
 

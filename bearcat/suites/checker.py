@@ -261,7 +261,7 @@ def _verdict(run: Run) -> Finding:
     ended = [e for e in run.events if e["event"] == "sent" and _kind(e["key"]) == "state"]
     final = next((e["message"] for e in reversed(ended) if e["message"]["phase"] == "ended"), None)
     if final is None:
-        if "fault[" in reason or any(e["gives_up"] and e["why"] == reason for e in run.deaths):
+        if _stopped_for_a_reason(run):
             return Finding("verdict", True, f"the run ended without a verdict, and says why: {reason}")
         return Finding("verdict", None, f"the game never ended ({reason})")
     if final.get("judged_on") != "truth":
@@ -440,6 +440,10 @@ def _plugins(run: Run) -> Finding:
     if end is None and run.outcome is not None and run.outcome.get("ended"):
         why = "the record lacks the game's end (lines a full disk refused, say)"
         return Finding("plugins", None, f"{said}; {why}, so whether each peer went on cannot be judged")
+    if end is None and _stopped_for_a_reason(run):
+        assert run.outcome is not None
+        why = f"the run ended without a verdict because {run.outcome.get('reason')}"
+        return Finding("plugins", None, f"{said}; {why}, so whether the game went on to one cannot be judged")
     if end is None:
         return Finding("plugins", False, f"{said}, and the game ended without a verdict (first: {first})")
     last_fault: dict[str, float] = {}
@@ -590,6 +594,15 @@ def _guided(run: Run, peers: list[str], after: float) -> float | None:
         if e["event"] == "received" and e["receiver"] in peers and _kind(e["key"]) == "guidance" and e["t"] >= after
     ]
     return min(times, default=None)
+
+
+def _stopped_for_a_reason(run: Run) -> bool:
+    """Whether the run's outcome names why it has no verdict: a fault of its plan hit a peer the game
+    needs, or supervision gave a peer up."""
+    if run.outcome is None:
+        return False
+    reason = run.outcome.get("reason", "")
+    return "fault[" in reason or any(e["gives_up"] and e["why"] == reason for e in run.deaths)
 
 
 def _game_end(run: Run) -> float | None:
