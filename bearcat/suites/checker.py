@@ -32,7 +32,9 @@ broken, or does not apply to the run (``None``), with one line of evidence:
   its peer going: the peer sent on after it (a walker its truth, the
   ground station its state and UAV tasks), or the game ended within
   ``IN_FLIGHT`` s of it; and the game ended with a verdict (not judged
-  where the outcome says it ended but the record lost its end);
+  where the outcome says it ended but the record lost its end, nor where
+  the run has no verdict because a planned fault or supervision stopped
+  it, as ``verdict`` accepts);
 - ``leftovers``: no process the run started still runs, and a kernel run
   left neither its link nor its route in the host's namespace. The run
   names its own (``runtime.processes``, ``endpoint.json``): a process is
