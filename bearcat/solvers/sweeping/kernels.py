@@ -46,29 +46,23 @@ _ITERATIONS = 60  # at most, of the safeguarded Newton; bisection alone would ta
 
 
 @njit(cache=True, inline="always")
+def _upwind(gap, inv, q, s):
+    """``q`` and ``s`` with one axis's difference added where it points the
+    player's way: its square to ``q``, its slope in the value to ``s``."""
+    x = gap * inv
+    if x > 0.0:
+        return q + x * x, s + x * inv
+    return q, s
+
+
+@njit(cache=True, inline="always")
 def _terms(u, a0, a1, b0, b1, ia0, ia1, ib0, ib1):
     """The attacker's and the defender's upwind gradient norms at value ``u``
     and their derivatives in ``u``: (A, dA, D, dD)."""
-    qa = 0.0
-    sa = 0.0
-    x = (u - a0) * ia0
-    if x > 0.0:
-        qa += x * x
-        sa += x * ia0
-    x = (u - a1) * ia1
-    if x > 0.0:
-        qa += x * x
-        sa += x * ia1
-    qd = 0.0
-    sd = 0.0
-    x = (b0 - u) * ib0
-    if x > 0.0:
-        qd += x * x
-        sd += x * ib0
-    x = (b1 - u) * ib1
-    if x > 0.0:
-        qd += x * x
-        sd += x * ib1
+    qa, sa = _upwind(u - a0, ia0, 0.0, 0.0)
+    qa, sa = _upwind(u - a1, ia1, qa, sa)
+    qd, sd = _upwind(b0 - u, ib0, 0.0, 0.0)
+    qd, sd = _upwind(b1 - u, ib1, qd, sd)
     A = math.sqrt(qa)
     D = math.sqrt(qd)
     dA = sa / A if A > 0.0 else 0.0
