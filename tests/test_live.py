@@ -4,10 +4,11 @@ starts, and leaves no process behind; a walker killed mid-game is
 seen gone within two seconds and ends the game with that reason; garbage
 published on every key of the game is dropped and counted while the game
 goes on; an agent's exceptions are recorded and counted while its peer goes
-on; Ctrl-C stops everything; a person at a terminal steers a keyboard
-walker; an agent named with --joins, a walker or a phone's page bridge, is
-started by hand and waited for; a client whose router is not there says so
-in one sentence."""
+on; what reaches a peer while its guidance warms up waits for it; Ctrl-C
+stops everything; a person at a terminal steers a keyboard walker; an
+agent named with --joins, a walker or a phone's page bridge, is started
+by hand and waited for; a client whose router is not there says so in one
+sentence."""
 
 import asyncio
 import json
@@ -265,6 +266,64 @@ def test_a_peer_whose_agent_raises_records_and_counts_it_and_goes_on(tmp_path):
     assert sum(1 for m in answers if m.t > failed[0]["t"]) > 10
     assert reason == f"game ended: enough; agent failures: gs {faulty.raised}"
     assert agent_failures(tmp_path / "run" / "peers") == {"gs": faulty.raised}
+
+
+def test_what_arrives_while_the_guidance_warms_up_waits_for_it_and_is_handled_in_order(tmp_path):
+    """The warm-up runs off the loop and calls the guidance itself: an
+    agent handling a fix on the loop meanwhile would run beside it, and
+    would wait out the interpreter the warm-up holds on the clock its guard
+    times. The fixes that reach the peer while it warms up reach its agent
+    only once the warm-up has ended, every one of them, in order."""
+    scenario = load_scenario(write_scenario(tmp_path, netem="ideal"))
+    game = scenario.name
+    players = build_cast(scenario, load_profile("ideal"), 0, people=[], ground=True)
+    fix = keys.fix(game, "attacker")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    handled: list[tuple[float, int]] = []  # (when, seq) of each attacker fix the agent handled
+    reached: list[int] = []  # seqs of the attacker fixes that reached the peer's session while it warmed up
+    warming: list[float] = []  # when the warm-up began and ended
+    published = threading.Event()
+
+    class Timed(Faulty):
+        def handle(self, key, message, now):
+            if key == fix:
+                handled.append((time.monotonic(), message.seq))
+            return super().handle(key, message, now)
+
+    def warm_up():
+        warming.append(time.monotonic())
+        players.warm_up()
+        while len(reached) < 5 and not published.is_set():
+            time.sleep(0.01)
+        warming.append(time.monotonic())
+
+    def play(player):
+        """The attacker reports until the peer is up, then the game ends."""
+        seq = 0
+        while not player.alive(keys.every(game, "alive")) and seq < 600:
+            seq += 1
+            lat, lon = scenario.map.to_geodetic(25.0, 22.0)
+            player.put(fix, encode(Fix(agent="attacker", seq=seq, t=time.time(), lat=lat, lon=lon)), reliable=False)
+            time.sleep(0.05)
+        published.set()
+        player.put(keys.state(game), encode(GameState(seq=1, t=time.time(), phase="ended", reason="enough")))
+
+    with (
+        ZenohSession("gs", config(listen=[endpoint])) as session,
+        ZenohSession("player", config(connect=[endpoint])) as player,
+        closing(EventLog(tmp_path / "run" / "peers" / "gs.jsonl")) as record,
+    ):
+        session.subscribe(fix, lambda k, p, s: reached.append(decode(p, k).seq) if len(warming) == 1 else None)
+        players_thread = threading.Thread(target=play, args=(player,))
+        players_thread.start()
+        reason = asyncio.run(run_peer([Timed(players.guidance)], session, game, record=record, warm_up=warm_up))
+        players_thread.join()
+    assert reason == "game ended: enough"
+    assert len(reached) >= 5, "the attacker's fixes never reached the warming peer"
+    ended = warming[1]
+    assert all(when > ended for when, _ in handled), [when - ended for when, _ in handled if when <= ended]
+    seqs = [seq for _, seq in handled]
+    assert seqs == sorted(seqs) and set(reached) <= set(seqs), (reached, seqs)
 
 
 def test_a_client_whose_router_is_not_there_says_so_in_one_sentence(tmp_path, env):

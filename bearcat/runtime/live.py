@@ -122,6 +122,7 @@ class PeerRun:
         self.soon = Handoff(self.loop).put  # from Zenoh's threads; what arrives while the peer shuts down is dropped
         session.on_refused = lambda *refusal: self.soon(self._refused, *refusal)
         self.handles: dict[str, Callable] = {}
+        self.held: list[tuple[Callable, tuple]] | None = None  # what arrived while the guidance warms up
         for agent in self.agents:
             self._attach(agent)
         self.notices = Inbox(session.name)
@@ -178,6 +179,9 @@ class PeerRun:
     def _handle(self, agent, key, payload, sender) -> None:
         if self.session.closed:  # held by the shim past the end of the peer
             return
+        if self.held is not None:
+            self.held.append((self._handle, (agent, key, payload, sender)))
+            return
         message = self.dispatch.receive(agent, key, payload, sender)
         if isinstance(message, GameState) and message.phase == "ended" and not self.finished.is_set():
             self.why = f"game ended: {message.reason}"
@@ -197,7 +201,9 @@ class PeerRun:
             self.loop.call_later(max(d.at - now, 0.0), self._handle, agent, key, d.payload, sender)
 
     def _watched(self, agent, key, alive) -> None:
-        if not self.session.closed:  # tokens vanish as the peer's own session closes
+        if self.held is not None:
+            self.held.append((self._watched, (agent, key, alive)))
+        elif not self.session.closed:  # tokens vanish as the peer's own session closes
             self.dispatch.peer(agent, key, alive)
 
     def _refused(self, key, claimed, category, reason) -> None:
@@ -312,14 +318,26 @@ class PeerRun:
             say(f"guidance answers from the {grid}-point sets from now on")
 
     async def _warm(self, warm_up) -> None:
+        """Run ``warm_up`` off the loop, which stays free to hear a stop,
+        while what arrives for the agents waits for it: the warm-up calls
+        the agents' guidance itself, which is no code to call from two
+        threads at once, and it holds the interpreter for long stretches
+        as it loads or compiles code, which a call on the loop meanwhile
+        would wait out on the clock its guard holds to its budget. What waited is
+        then handled in the order it came."""
         began = self.clock.now()
+        self.held = []
         try:
             await self.loop.run_in_executor(None, warm_up)
         except Exception as exc:  # the game's own first queries will show what is wrong
             log.warning("the guidance could not be readied before the game (%s)", exc)
-            return
-        done = self.clock.now()
-        self.record.note(done, "warmed", seconds=round(done - began, 3))
+        else:
+            done = self.clock.now()
+            self.record.note(done, "warmed", seconds=round(done - began, 3))
+        finally:
+            held, self.held = self.held, None
+            for handle, args in held:
+                handle(*args)
 
 
 def _orphaned(parent: int) -> bool:
