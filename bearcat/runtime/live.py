@@ -323,8 +323,8 @@ class PeerRun:
         the agents' guidance itself, which is no code to call from two
         threads at once, and it holds the interpreter for long stretches
         as it loads or compiles code, which a call on the loop meanwhile
-        would wait out on the clock its guard holds to its budget. What waited is
-        then handled in the order it came."""
+        would wait out on the clock its guard holds to its budget. What
+        waited is then handled in the order it came."""
         began = self.clock.now()
         self.held = []
         try:
